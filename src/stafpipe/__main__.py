@@ -1,0 +1,3 @@
+from stafpipe.cli import app
+
+app()

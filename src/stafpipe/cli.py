@@ -1,0 +1,91 @@
+"""The `stafpipe` command: one subcommand per stage. Trailing arguments are Hydra overrides and flags
+(`-m` for a sweep, `--cfg job`, `--info`), passed to the stage as to any Hydra application."""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from stafpipe.errors import StafpipeError
+
+app = typer.Typer(
+    help="stafpipe: subteaming and adaptive formation control experiments. "
+    "Each stage takes Hydra overrides, e.g. `stafpipe generate formation=wedge seed=3`, or `-m` to sweep.",
+    no_args_is_help=True,
+    add_completion=False,
+)
+_HYDRA_ARGS = {"allow_extra_args": True, "ignore_unknown_options": True}
+
+
+def _stage(stage: str, overrides: list[str]) -> None:
+    from stafpipe.launch import STAGE_FUNCTIONS, launch
+
+    if stage not in STAGE_FUNCTIONS:
+        typer.echo(f"stafpipe {stage}: not implemented yet", err=True)
+        raise typer.Exit(2)
+    raise typer.Exit(launch(stage, overrides))
+
+
+@app.command(context_settings=_HYDRA_ARGS)
+def generate(ctx: typer.Context) -> None:
+    """Generate the synthetic formation dataset (STAF Appendix C) as Parquet + CSV."""
+    _stage("generate", ctx.args)
+
+
+@app.command("train-high", context_settings=_HYDRA_ARGS)
+def train_high(ctx: typer.Context) -> None:
+    """Train STAF's high level (deep graph cut for subteaming) on a generated dataset."""
+    _stage("train-high", ctx.args)
+
+
+@app.command("train-ppo", context_settings=_HYDRA_ARGS)
+def train_ppo(ctx: typer.Context) -> None:
+    """Train a navigation policy (STAF intermediate + low level, or DGNN) with PPO."""
+    _stage("train-ppo", ctx.args)
+
+
+@app.command("eval", context_settings=_HYDRA_ARGS)
+def eval_(ctx: typer.Context) -> None:
+    """Evaluate a method on a scenario over seeded episodes: results table + one MCAP file per episode."""
+    _stage("eval", ctx.args)
+
+
+@app.command(context_settings=_HYDRA_ARGS)
+def ablate(ctx: typer.Context) -> None:
+    """Run the graph-cut ablation study (STAF Fig. 7)."""
+    _stage("ablate", ctx.args)
+
+
+@app.command(context_settings=_HYDRA_ARGS)
+def plot(ctx: typer.Context) -> None:
+    """Draw figures and tables from run directories."""
+    _stage("plot", ctx.args)
+
+
+@app.command()
+def run(
+    pipeline: str = typer.Argument(..., help="A name in pipelines/ (e.g. smoke) or a path to a pipeline YAML."),
+    force: bool = typer.Option(False, "--force", help="Run every step, even those already done for the same config."),
+) -> None:
+    """Run a pipeline: its stages in order, skipping those already done for the same resolved config."""
+    from stafpipe.pipeline import run_pipeline
+
+    try:
+        code = run_pipeline(pipeline, force=force)
+    except StafpipeError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    raise typer.Exit(code)
+
+
+@app.command()
+def inspect(file: str = typer.Argument(..., help="An episode's MCAP file.")) -> None:
+    """Summarise an episode's MCAP log and recompute its metrics."""
+    typer.echo(f"stafpipe inspect {file}: not implemented yet", err=True)
+    raise typer.Exit(2)
+
+
+def main() -> None:  # pragma: no cover - console entry for `python -m stafpipe`
+    app(prog_name="stafpipe")
+    sys.exit(0)

@@ -1,0 +1,13 @@
+"""Structured configs: dataclasses registered in Hydra's ConfigStore so that every YAML is type-checked."""
+
+from hydra.core.config_store import ConfigStore
+
+from stafpipe.config.schema import DataConfig, FormationConfig, StafConfig
+
+__all__ = ["DataConfig", "FormationConfig", "StafConfig", "register_configs"]
+
+
+def register_configs() -> None:
+    """Register the schemas: `stafpipe_schema` is the root every primary config starts from."""
+    cs = ConfigStore.instance()
+    cs.store(name="stafpipe_schema", node=StafConfig)

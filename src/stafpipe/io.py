@@ -1,0 +1,45 @@
+"""Atomic output writing: a reader never sees a half-written file, a killed run leaves none behind."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+
+def atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
+    """Call `write(tmp)` on a temporary sibling of `path`, then rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def write_json(path: Path, data: Any) -> Path:
+    """Write `data` as indented JSON, atomically."""
+    return atomic_write(path, lambda tmp: tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n"))
+
+
+def write_table(df: pd.DataFrame, stem: Path, metadata: dict[str, str] | None = None) -> list[Path]:
+    """Write `df` as `stem.parquet` (with key/value metadata) and its CSV twin `stem.csv`, each atomically."""
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    if metadata:
+        merged = dict(table.schema.metadata or {})
+        merged.update({k.encode(): v.encode() for k, v in metadata.items()})
+        table = table.replace_schema_metadata(merged)
+    stem = Path(stem)
+    parquet = atomic_write(stem.with_suffix(".parquet"), lambda tmp: pq.write_table(table, tmp))
+    csv = atomic_write(stem.with_suffix(".csv"), lambda tmp: df.to_csv(tmp, index=False))
+    return [parquet, csv]

@@ -1,0 +1,113 @@
+"""Runs a stage through `hydra.main`, so that multirun, launchers, `--cfg` and `--info` work as in plain Hydra.
+
+Every stage is a plain function `run_<stage>(cfg, out_dir) -> list[Path]` (its result files). `stage_task` is the one
+Hydra task function: it calls the stage, then writes the resolved config and a completion marker (`stage.json`) that
+pipelines use to skip finished work.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import logging
+import shutil
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import hydra
+from hydra.core.global_hydra import GlobalHydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
+
+from stafpipe import __version__
+from stafpipe.config import register_configs
+from stafpipe.errors import StafpipeError
+from stafpipe.io import atomic_write, write_json
+from stafpipe.paths import conf_dir
+
+log = logging.getLogger(__name__)
+
+# Stage name (as typed on the command line) -> "module:function". A stage missing here is not implemented yet.
+STAGE_FUNCTIONS: dict[str, str] = {
+    "generate": "stafpipe.stages.generate:run_generate",
+}
+MARKER = "stage.json"
+
+
+def config_name(stage: str) -> str:
+    """The primary config file (without .yaml) of `stage`: `train-high` -> `train_high`."""
+    return stage.replace("-", "_")
+
+
+def config_hash(cfg: DictConfig) -> str:
+    """SHA-256 of the resolved job config: equal configs give equal hashes, whatever their origin."""
+    text = OmegaConf.to_yaml(cfg, resolve=True, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def stage_function(stage: str) -> Callable[[DictConfig, Path], list[Path]]:
+    """Import the plain function behind `stage`."""
+    module, _, name = STAGE_FUNCTIONS[stage].partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def _discard_if_empty(out_dir: Path) -> None:
+    # A run that failed before writing any result leaves no directory behind: only Hydra's own files are in it.
+    if out_dir.is_dir() and all(p.name == ".hydra" or p.suffix == ".log" for p in out_dir.iterdir()):
+        logging.shutdown()
+        shutil.rmtree(out_dir, ignore_errors=True)
+        try:  # and its date folder, if this run was the only one in it
+            out_dir.parent.rmdir()
+        except OSError:
+            pass
+
+
+def stage_task(cfg: DictConfig) -> None:
+    """Hydra's task function for every stage."""
+    out_dir = Path(HydraConfig.get().runtime.output_dir)
+    started = time.perf_counter()
+    try:
+        outputs = stage_function(cfg.stage)(cfg, out_dir)
+    except StafpipeError as exc:
+        _discard_if_empty(out_dir)
+        if HydraConfig.get().mode == RunMode.MULTIRUN:
+            raise  # the launcher reports it for this job of the sweep
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
+    except BaseException:
+        _discard_if_empty(out_dir)
+        raise
+    resolved = OmegaConf.to_yaml(cfg, resolve=True)
+    atomic_write(out_dir / "config.yaml", lambda tmp: tmp.write_text(resolved))
+    write_json(
+        out_dir / MARKER,
+        {
+            "stage": cfg.stage,
+            "config_hash": config_hash(cfg),
+            "outputs": sorted(str(Path(p).relative_to(out_dir)) for p in outputs),
+            "seconds": round(time.perf_counter() - started, 3),
+            "stafpipe_version": __version__,
+        },
+    )
+    log.info("%s finished: %s", cfg.stage, out_dir)
+
+
+def launch(stage: str, overrides: Sequence[str]) -> int:
+    """Run `stage` with Hydra command-line `overrides` (and flags such as -m, --cfg); return the exit code."""
+    register_configs()
+    saved_argv = sys.argv
+    sys.argv = [f"stafpipe {stage}", *overrides]
+    GlobalHydra.instance().clear()
+    main = hydra.main(version_base="1.3", config_path=str(conf_dir()), config_name=config_name(stage))(stage_task)
+    try:
+        main()
+    except SystemExit as exc:
+        code = exc.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    finally:
+        sys.argv = saved_argv
+        GlobalHydra.instance().clear()
+    return 0

@@ -1,0 +1,137 @@
+"""`stafpipe run PIPELINE`: the ordered stage invocations of a pipelines/<name>.yaml file.
+
+A step's run directory is `<out_root>/pipelines/<pipeline>/<NN>-<step>-<hash>`, where the hash is that of the step's
+resolved config. A step whose directory already holds a completion marker with the same hash is skipped (unless
+forced). An override may name an earlier step's directory as `{steps.<name>.dir}`.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from hydra import compose, initialize_config_dir
+from hydra.core.global_hydra import GlobalHydra
+from omegaconf import DictConfig, OmegaConf
+
+from stafpipe.config import register_configs
+from stafpipe.errors import StafpipeError
+from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, launch
+from stafpipe.paths import conf_dir, pipelines_dir
+
+STAGES = ("generate", "train-high", "train-ppo", "eval", "ablate", "plot")
+_STEP_REF = re.compile(r"\{steps\.([A-Za-z0-9_-]+)\.dir\}")
+
+
+@dataclass
+class PipelineStep:
+    """One stage invocation: the stage and its Hydra overrides."""
+
+    name: str
+    stage: str
+    overrides: list[str]
+
+
+@dataclass
+class Pipeline:
+    """A named, ordered list of steps, read from YAML."""
+
+    name: str
+    description: str
+    steps: list[PipelineStep]
+
+
+def find_pipeline(name_or_path: str) -> Path:
+    """A pipeline file given by path, or by name in ./pipelines/ or the shipped pipelines/."""
+    candidates = [Path(name_or_path), Path("pipelines") / f"{name_or_path}.yaml", pipelines_dir() / f"{name_or_path}.yaml"]
+    for path in candidates:
+        if path.is_file():
+            return path
+    shipped = sorted(p.stem for p in pipelines_dir().glob("*.yaml"))
+    raise StafpipeError(f"no pipeline '{name_or_path}' (a file, or one of: {', '.join(shipped)})")
+
+
+def load_pipeline(path: Path) -> Pipeline:
+    """Read and validate a pipeline file; errors name the file and the bad field."""
+    try:
+        raw = OmegaConf.to_container(OmegaConf.load(path))
+    except Exception as exc:  # noqa: BLE001 - any parse error becomes one clear message
+        raise StafpipeError(f"{path}: not valid YAML ({exc})") from exc
+    if not isinstance(raw, dict) or not isinstance(raw.get("steps"), list) or not raw["steps"]:
+        raise StafpipeError(f"{path}: needs a non-empty list 'steps'")
+    unknown = set(raw) - {"name", "description", "steps"}
+    if unknown:
+        raise StafpipeError(f"{path}: unknown field(s) {sorted(unknown)}")
+    steps: list[PipelineStep] = []
+    for i, item in enumerate(raw["steps"]):
+        where = f"{path}: steps[{i}]"
+        if not isinstance(item, dict) or set(item) - {"name", "stage", "overrides"}:
+            raise StafpipeError(f"{where}: a step has 'stage', optional 'name' and 'overrides', got {item!r}")
+        if item.get("stage") not in STAGES:
+            raise StafpipeError(f"{where}.stage: must be one of {list(STAGES)}, got {item.get('stage')!r}")
+        overrides = item.get("overrides", [])
+        if not isinstance(overrides, list) or not all(isinstance(o, str | int | float) for o in overrides):
+            raise StafpipeError(f"{where}.overrides: must be a list of strings")
+        name = str(item.get("name", item["stage"]))
+        if any(s.name == name for s in steps):
+            raise StafpipeError(f"{where}.name: '{name}' is used twice; give the steps distinct names")
+        steps.append(PipelineStep(name, item["stage"], [str(o) for o in overrides]))
+    return Pipeline(str(raw.get("name", path.stem)), str(raw.get("description", "")), steps)
+
+
+def compose_config(stage: str, overrides: list[str]) -> DictConfig:
+    """The job config `stage` would run with these overrides (Hydra's compose API)."""
+    register_configs()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(conf_dir()), version_base="1.3"):
+        return compose(config_name=config_name(stage), overrides=overrides)
+
+
+def _is_done(run_dir: Path, digest: str) -> bool:
+    marker = run_dir / MARKER
+    try:
+        return json.loads(marker.read_text()).get("config_hash") == digest
+    except (OSError, ValueError):
+        return False
+
+
+def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("outputs")) -> int:
+    """Run every step in order; stop at the first failure. Returns the exit code."""
+    pipe = load_pipeline(find_pipeline(name_or_path))
+    dirs: dict[str, Path] = {}
+    plan: list[tuple[PipelineStep, list[str], Path, str]] = []
+    for i, step in enumerate(pipe.steps):  # compose every step first: a bad config stops the pipeline before any work
+        if step.stage not in STAGE_FUNCTIONS:
+            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}': stage {step.stage} is not implemented yet")
+
+        def ref(match: re.Match[str], _step: PipelineStep = step) -> str:
+            if match.group(1) not in dirs:
+                raise StafpipeError(f"step '{_step.name}' refers to '{match.group(1)}', which is not an earlier step")
+            return str(dirs[match.group(1)])
+
+        overrides = [_STEP_REF.sub(ref, o) for o in step.overrides]
+        try:
+            cfg = compose_config(step.stage, overrides)
+        except Exception as exc:  # noqa: BLE001 - Hydra's composition errors name the key
+            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}' has a bad config: {exc}") from exc
+        digest = config_hash(cfg)
+        run_dir = (out_root / "pipelines" / pipe.name / f"{i:02d}-{step.name}-{digest[:10]}").resolve()
+        dirs[step.name] = run_dir
+        plan.append((step, overrides, run_dir, digest))
+
+    for i, (step, overrides, run_dir, digest) in enumerate(plan, start=1):
+        head = f"[{i}/{len(plan)}] {step.name} ({step.stage})"
+        if not force and _is_done(run_dir, digest):
+            print(f"{head}: skipped, already done for this config in {run_dir}")
+            continue
+        started = time.perf_counter()
+        code = launch(step.stage, [*overrides, f"hydra.run.dir='{run_dir}'"])
+        if code != 0 or not _is_done(run_dir, digest):
+            print(f"{head}: failed (exit code {code}); pipeline {pipe.name} stopped")
+            return code or 1
+        print(f"{head}: done in {time.perf_counter() - started:.1f} s -> {run_dir}")
+    print(f"pipeline {pipe.name}: all {len(plan)} steps done")
+    return 0

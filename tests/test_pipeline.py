@@ -1,0 +1,48 @@
+import pytest
+
+from conftest import job_dirs
+from stafpipe.errors import StafpipeError
+from stafpipe.pipeline import run_pipeline
+
+
+def test_smoke_runs_then_skips_then_forces(workdir, capsys) -> None:
+    assert run_pipeline("smoke") == 0
+    first = {d: (d / "formations.parquet").stat().st_mtime_ns for d in job_dirs(workdir)}
+    assert len(first) == 2
+    capsys.readouterr()
+    assert run_pipeline("smoke") == 0
+    out = capsys.readouterr().out
+    assert out.count("skipped") == 2
+    assert {d: (d / "formations.parquet").stat().st_mtime_ns for d in job_dirs(workdir)} == first
+    assert run_pipeline("smoke", force=True) == 0
+    assert all((d / "formations.parquet").stat().st_mtime_ns != t for d, t in first.items())
+
+
+def _write(workdir, text: str):
+    path = workdir / "p.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_failing_step_stops_the_pipeline(workdir, capsys) -> None:
+    path = _write(
+        workdir,
+        "steps:\n"
+        "  - {name: ok, stage: generate, overrides: [experiment=smoke]}\n"
+        "  - {name: bad, stage: generate, overrides: [experiment=smoke, data.n_min=1]}\n"
+        "  - {name: never, stage: generate, overrides: [experiment=smoke, seed=9]}\n",
+    )
+    assert run_pipeline(path) != 0
+    assert "bad (generate): failed" in capsys.readouterr().out
+    assert len(job_dirs(workdir)) == 1
+
+
+def test_step_reference_and_bad_files(workdir) -> None:
+    with pytest.raises(StafpipeError, match="stage"):
+        run_pipeline(_write(workdir, "steps:\n  - {stage: fly}\n"))
+    with pytest.raises(StafpipeError, match="not an earlier step"):
+        run_pipeline(_write(workdir, "steps:\n  - {stage: generate, overrides: ['+x={steps.later.dir}']}\n"))
+    with pytest.raises(StafpipeError, match="bad config"):
+        run_pipeline(_write(workdir, "steps:\n  - {stage: generate, overrides: [wrong=1]}\n"))
+    with pytest.raises(StafpipeError, match="no pipeline"):
+        run_pipeline("does-not-exist")

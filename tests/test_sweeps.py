@@ -1,0 +1,32 @@
+"""Sweeps go through Hydra's launcher plugins: each job its own directory with its own config."""
+
+import pytest
+from omegaconf import OmegaConf
+
+from conftest import job_dirs
+from stafpipe.launch import launch
+
+SMALL = ["experiment=smoke", "data.instances=10"]
+
+
+def _configs(root):
+    return sorted(
+        (OmegaConf.load(d / ".hydra" / "config.yaml").formation.type, OmegaConf.load(d / ".hydra" / "config.yaml").seed)
+        for d in job_dirs(root)
+    )
+
+
+@pytest.mark.parametrize("launcher", [[], ["hydra/launcher=local", "hydra.launcher.n_jobs=2"]], ids=["basic", "joblib"])
+def test_two_by_two_multirun_gives_four_jobs(workdir, launcher) -> None:
+    code = launch("generate", ["-m", *launcher, "formation=circle,wedge", "seed=1,2", *SMALL])
+    assert code == 0
+    assert _configs(workdir / "outputs" / "multirun") == [("circle", 1), ("circle", 2), ("wedge", 1), ("wedge", 2)]
+    for d in job_dirs(workdir / "outputs" / "multirun"):
+        assert (d / "formations.parquet").is_file()
+
+
+def test_submitit_local_two_jobs(workdir) -> None:
+    code = launch("generate", ["-m", "hydra/launcher=submitit_local", "seed=5,6", *SMALL])
+    assert code == 0
+    dirs = job_dirs(workdir / "outputs" / "multirun")
+    assert [OmegaConf.load(d / "config.yaml").seed for d in dirs] == [5, 6]
