@@ -7,15 +7,15 @@ from stafpipe.pipeline import run_pipeline
 
 def test_smoke_runs_then_skips_then_forces(workdir, capsys) -> None:
     assert run_pipeline("smoke") == 0
-    first = {d: (d / "formations.parquet").stat().st_mtime_ns for d in job_dirs(workdir)}
-    assert len(first) == 2
+    first = {d: (d / "stage.json").stat().st_mtime_ns for d in job_dirs(workdir)}
+    assert len(first) == 3 and len(list(workdir.rglob("episodes/*.mcap"))) == 2
     capsys.readouterr()
     assert run_pipeline("smoke") == 0
     out = capsys.readouterr().out
-    assert out.count("skipped") == 2
-    assert {d: (d / "formations.parquet").stat().st_mtime_ns for d in job_dirs(workdir)} == first
+    assert out.count("skipped") == 3
+    assert {d: (d / "stage.json").stat().st_mtime_ns for d in job_dirs(workdir)} == first
     assert run_pipeline("smoke", force=True) == 0
-    assert all((d / "formations.parquet").stat().st_mtime_ns != t for d, t in first.items())
+    assert all((d / "stage.json").stat().st_mtime_ns != t for d, t in first.items())
 
 
 def _write(workdir, text: str):

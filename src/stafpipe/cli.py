@@ -80,10 +80,27 @@ def run(
 
 
 @app.command()
-def inspect(file: str = typer.Argument(..., help="An episode's MCAP file.")) -> None:
-    """Summarise an episode's MCAP log and recompute its metrics."""
-    typer.echo(f"stafpipe inspect {file}: not implemented yet", err=True)
-    raise typer.Exit(2)
+def inspect(
+    file: str = typer.Argument(..., help="An episode's MCAP file."),
+    recover: bool = typer.Option(False, "--recover", help="Write FILE.recovered.mcap with every complete record."),
+) -> None:
+    """Summarise an episode's MCAP log and recompute its metrics from the log alone."""
+    from stafpipe.episode_log import recover as recover_log
+    from stafpipe.inspect_log import describe
+
+    try:
+        if recover:
+            out = file[: -len(".mcap")] + ".recovered.mcap" if file.endswith(".mcap") else file + ".recovered.mcap"
+            kept, channels = recover_log(file, out)
+            typer.echo(f"recovered {kept} messages on {channels} channels into {out}")
+            return
+        report, equal = describe(file)
+    except StafpipeError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    typer.echo(report)
+    if not equal:
+        raise typer.Exit(1)
 
 
 def main() -> None:  # pragma: no cover - console entry for `python -m stafpipe`

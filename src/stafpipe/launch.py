@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 # Stage name (as typed on the command line) -> "module:function". A stage missing here is not implemented yet.
 STAGE_FUNCTIONS: dict[str, str] = {
     "generate": "stafpipe.stages.generate:run_generate",
+    "eval": "stafpipe.stages.eval:run_eval",
 }
 MARKER = "stage.json"
 

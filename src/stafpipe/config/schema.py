@@ -13,6 +13,9 @@ from omegaconf import MISSING
 
 from stafpipe.errors import ConfigError
 from stafpipe.formations import FORMATION_TYPES
+from stafpipe.scenario import ScenarioConfig
+from stafpipe.sensing import SensingConfig
+from stafpipe.world import WorldConfig
 
 
 def require(ok: bool, key: str, message: str, value: Any) -> None:
@@ -25,16 +28,18 @@ def require(ok: bool, key: str, message: str, value: Any) -> None:
 class FormationConfig:
     """The team's formation template (group `formation`)."""
 
-    type: str = "circle"
-    """One of circle, wedge, line, square, t, v."""
-    spacing: float = 1.0
-    """Distance between neighbouring slots, in metres."""
+    type: str | None = "circle"
+    """One of circle, wedge, line, square, t, v; null (option `scenario`) keeps the scenario's own formation."""
+    spacing: float | None = 1.0
+    """Distance between neighbouring slots, in metres; null keeps the scenario's."""
     angle_deg: float = 90.0
     """Apex angle of the `v` formation in degrees (Cezayirli simulation 2 uses 120)."""
 
-    def check(self, key: str = "formation") -> None:
+    def check(self, key: str = "formation", allow_unset: bool = False) -> None:
+        if allow_unset and self.type is None:
+            return
         require(self.type in FORMATION_TYPES, f"{key}.type", f"must be one of {list(FORMATION_TYPES)}", self.type)
-        require(self.spacing > 0, f"{key}.spacing", "must be > 0", self.spacing)
+        require(self.spacing is not None and self.spacing > 0, f"{key}.spacing", "must be > 0", self.spacing)
         require(0 < self.angle_deg < 180, f"{key}.angle_deg", "must be in (0, 180)", self.angle_deg)
 
 
@@ -81,6 +86,25 @@ class DataConfig:
 
 
 @dataclass
+class EvalConfig:
+    """Evaluation settings (section `eval`)."""
+
+    episodes: int = 10
+    """Seeded episodes; episode k uses seed `seed * 100003 + k` for its start perturbation and sensing noise."""
+    goal_tolerance: float = 0.3
+    """A robot is at its goal within this distance (m)."""
+    cfi_margin: float = 0.1
+    """Safety margin (m) taken off each side of the narrowest passage for CFI's eta (STAF Section 4)."""
+    log_episodes: bool = True
+    """Write one MCAP file per episode under episodes/."""
+
+    def check(self, key: str = "eval") -> None:
+        require(self.episodes >= 1, f"{key}.episodes", "must be >= 1", self.episodes)
+        require(self.goal_tolerance > 0, f"{key}.goal_tolerance", "must be > 0", self.goal_tolerance)
+        require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
+
+
+@dataclass
 class StafConfig:
     """The root config every stage composes; a stage reads the sections it needs."""
 
@@ -90,3 +114,9 @@ class StafConfig:
     """Seed of every random draw of the run."""
     formation: FormationConfig = field(default_factory=FormationConfig)
     data: DataConfig = field(default_factory=DataConfig)
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    method: Any = MISSING
+    """The method (group `method`); each option has its own dataclass (stafpipe.controllers.METHODS)."""
+    world: WorldConfig = field(default_factory=WorldConfig)
+    sensing: SensingConfig = field(default_factory=SensingConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)

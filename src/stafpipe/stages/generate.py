@@ -43,7 +43,7 @@ COLUMNS: dict[str, str] = {
 def generate_instances(data: DataConfig, formation: FormationConfig, seed: int) -> pd.DataFrame:
     """The dataset as a tidy table, one row per robot (columns: COLUMNS). Deterministic for `seed`."""
     data.check()
-    formation.check()
+    formation.check()  # generate needs a formation: the `scenario` option (type null) is refused here
     rng = np.random.default_rng(seed)
     kinds = list(data.mix) or [formation.type]
     cache: dict[tuple[str, int], np.ndarray] = {}

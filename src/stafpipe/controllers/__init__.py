@@ -1,0 +1,30 @@
+"""Methods, one file each, behind one Controller interface; `METHODS` maps a `method.name` to its config and class."""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from stafpipe.controllers.base import Controller, Event, TeamInfo
+
+# name -> ("module:ConfigClass", "module:ControllerClass")
+METHODS: dict[str, tuple[str, str]] = {
+    "straight": ("stafpipe.controllers.straight:StraightConfig", "stafpipe.controllers.straight:StraightController"),
+}
+
+__all__ = ["METHODS", "Controller", "Event", "TeamInfo", "make_controller", "method_config_class"]
+
+
+def _load(ref: str) -> Any:
+    module, _, name = ref.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def method_config_class(name: str) -> type:
+    """The config dataclass of method `name`."""
+    return _load(METHODS[name][0])
+
+
+def make_controller(cfg: Any) -> Controller:
+    """Build the controller of a method config (a dataclass instance with a `name`)."""
+    return _load(METHODS[cfg.name][1])(cfg)

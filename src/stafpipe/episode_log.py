@@ -1,0 +1,199 @@
+"""EpisodeLog: one episode as an MCAP file with ROS 2 (CDR) message encodings, readable by Foxglove and as a rosbag2.
+
+Channels: /episode (EpisodeInfo, once), /robots/poses (geometry_msgs/PoseArray), /robots/state (TeamState),
+/events (Event), /metrics (EpisodeMetrics, once at the end). Message definitions are the .msg files beside this module.
+Chunks carry CRCs and are small, so a killed run loses at most its last chunk; `recover` rewrites what is complete.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import Writer as RawWriter
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from mcap_ros2.writer import Writer
+
+from stafpipe.errors import StafpipeError
+
+_MSG_DIR = Path(__file__).with_name("msg")
+CHUNK_SIZE = 32 * 1024
+TOPICS = {
+    "/episode": "stafpipe_msgs/msg/EpisodeInfo",
+    "/robots/poses": "geometry_msgs/msg/PoseArray",
+    "/robots/state": "stafpipe_msgs/msg/TeamState",
+    "/events": "stafpipe_msgs/msg/Event",
+    "/metrics": "stafpipe_msgs/msg/EpisodeMetrics",
+}
+
+
+class LogError(StafpipeError):
+    """An MCAP file is missing, truncated or not an episode log."""
+
+
+def _msgdef(datatype: str) -> str:
+    return (_MSG_DIR / (datatype.replace("/msg/", "__") + ".msg")).read_text()
+
+
+def _stamp(t: float) -> dict[str, int]:
+    sec = math.floor(t)
+    return {"sec": int(sec), "nanosec": int(round((t - sec) * 1e9))}
+
+
+class EpisodeLogWriter:
+    """Writes one episode; the file appears under its final name only when `close` completes."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.partial = self.path.with_name(self.path.name + ".part")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: BinaryIO = open(self.partial, "wb")  # noqa: SIM115 - closed in close()
+        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, enable_crcs=True)
+        self._schemas = {topic: self._writer.register_msgdef(dt, _msgdef(dt)) for topic, dt in TOPICS.items()}
+
+    def _write(self, topic: str, msg: dict[str, Any], t: float) -> None:
+        self._writer.write_message(topic, self._schemas[topic], msg, log_time=int(t * 1e9), publish_time=int(t * 1e9))
+
+    def info(self, method: str, seed: int, scenario_yaml: str, context: dict[str, Any], goal: np.ndarray) -> None:
+        """The episode's header: scenario, metric context, team goal."""
+        self._write("/episode", {"method": method, "seed": seed, "scenario_yaml": scenario_yaml,
+                                 "context_json": json.dumps(context), "goal_x": goal[:, 0].tolist(),
+                                 "goal_y": goal[:, 1].tolist()}, 0.0)
+
+    def state(self, t: float, pos: np.ndarray, vel: np.ndarray, heading: np.ndarray, targets: np.ndarray,
+              subteams: np.ndarray, movers: np.ndarray) -> None:
+        """One control step."""
+        poses = [{"position": {"x": float(p[0]), "y": float(p[1]), "z": 0.0},
+                  "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(h / 2), "w": math.cos(h / 2)}}
+                 for p, h in zip(pos, heading, strict=True)]
+        self._write("/robots/poses", {"header": {"stamp": _stamp(t), "frame_id": "map"}, "poses": poses}, t)
+        self._write("/robots/state", {
+            "stamp": _stamp(t), "time": t, "x": pos[:, 0].tolist(), "y": pos[:, 1].tolist(),
+            "vx": vel[:, 0].tolist(), "vy": vel[:, 1].tolist(), "heading": heading.tolist(),
+            "target_x": targets[:, 0].tolist(), "target_y": targets[:, 1].tolist(),
+            "subteam": subteams.astype(int).tolist(), "mover_x": movers[:, 0].tolist(), "mover_y": movers[:, 1].tolist(),
+        }, t)
+
+    def event(self, t: float, step: int, kind: str, robots: list[int], detail: str = "") -> None:
+        """A split, merge, fault or collision."""
+        self._write("/events", {"time": t, "step": step, "kind": kind, "robots": robots, "detail": detail}, t)
+
+    def metrics(self, t: float, values: dict[str, float]) -> None:
+        """The live metrics, at the end."""
+        self._write("/metrics", {"json": json.dumps(values)}, t)
+
+    def close(self) -> Path:
+        """Finish the file (summary, footer) and move it to its final name."""
+        self._writer.finish()
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._file.close()
+        os.replace(self.partial, self.path)
+        return self.path
+
+
+@dataclass
+class EpisodeRecord:
+    """An episode read back from MCAP."""
+
+    method: str
+    seed: int
+    scenario_yaml: str
+    context: dict[str, Any]
+    goal: np.ndarray
+    time: np.ndarray
+    positions: np.ndarray
+    velocities: np.ndarray
+    headings: np.ndarray
+    targets: np.ndarray
+    subteams: np.ndarray
+    movers: np.ndarray
+    events: list[dict[str, Any]] = field(default_factory=list)
+    metrics: dict[str, float] | None = None
+    topics: dict[str, int] = field(default_factory=dict)
+
+
+def read_episode(path: str | Path) -> EpisodeRecord:
+    """Read an episode log; a clear LogError if it is missing, damaged or not ours."""
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"{path}: no such file")
+    info, states, events, metrics, topics = None, [], [], None, {}
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for _, channel, _, msg in reader.iter_decoded_messages(log_time_order=True):
+                topic = channel.topic
+                topics[topic] = topics.get(topic, 0) + 1
+                if topic == "/episode":
+                    info = msg
+                elif topic == "/robots/state":
+                    states.append(msg)
+                elif topic == "/events":
+                    events.append({"time": msg.time, "step": msg.step, "kind": msg.kind, "robots": list(msg.robots),
+                                   "detail": msg.detail})
+                elif topic == "/metrics":
+                    metrics = json.loads(msg.json)
+    except (McapError, ValueError, KeyError, EOFError, OSError) as exc:
+        raise LogError(f"{path}: not a readable MCAP episode log ({type(exc).__name__}: {exc}); "
+                       "try `stafpipe inspect --recover`") from None
+    if info is None or not states:
+        raise LogError(f"{path}: not a stafpipe episode log (no /episode or /robots/state messages)")
+    arr = lambda *keys: np.stack([np.stack([np.asarray(getattr(s, k), float) for k in keys], -1) for s in states])  # noqa: E731
+    return EpisodeRecord(
+        method=info.method, seed=int(info.seed), scenario_yaml=info.scenario_yaml,
+        context=json.loads(info.context_json), goal=np.stack([info.goal_x, info.goal_y], -1),
+        time=np.array([s.time for s in states]), positions=arr("x", "y"), velocities=arr("vx", "vy"),
+        headings=np.stack([np.asarray(s.heading, float) for s in states]), targets=arr("target_x", "target_y"),
+        subteams=np.stack([np.asarray(s.subteam, int) for s in states]), movers=arr("mover_x", "mover_y"),
+        events=events, metrics=metrics, topics=topics,
+    )
+
+
+def recover(src: str | Path, dst: str | Path) -> tuple[int, int]:
+    """Copy every complete record of a truncated or damaged MCAP file into a valid one.
+
+    Returns (messages kept, channels). Stops at the first record that cannot be read.
+    """
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    with open(src, "rb") as f:
+        try:
+            for record in StreamReader(f, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    messages.append(record)
+        except (McapError, ValueError, EOFError, AssertionError, Exception):  # noqa: BLE001 - truncation shows many ways
+            pass
+    if not messages:
+        raise LogError(f"{src}: no complete message could be recovered")
+    dst = Path(dst)
+    tmp = dst.with_name(dst.name + ".part")
+    with open(tmp, "wb") as out:
+        writer = RawWriter(out, chunk_size=CHUNK_SIZE, enable_crcs=True)
+        writer.start(profile="ros2", library="stafpipe recover")
+        schema_ids = {old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
+                      for old, s in schemas.items()}
+        channel_ids = {old: writer.register_channel(topic=c.topic, message_encoding=c.message_encoding,
+                                                    schema_id=schema_ids.get(c.schema_id, 0), metadata=c.metadata)
+                       for old, c in channels.items()}
+        for m in messages:
+            if m.channel_id in channel_ids:
+                writer.add_message(channel_id=channel_ids[m.channel_id], log_time=m.log_time, data=m.data,
+                                   publish_time=m.publish_time, sequence=m.sequence)
+        writer.finish()
+    os.replace(tmp, dst)
+    return len(messages), len(channels)

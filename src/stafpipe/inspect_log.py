@@ -1,0 +1,48 @@
+"""`stafpipe inspect FILE.mcap`: what an episode log holds, and its metrics recomputed from the log alone."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from stafpipe.episode import scenario_from_yaml, trajectory_from_record
+from stafpipe.episode_log import EpisodeRecord, read_episode
+from stafpipe.metrics import MetricContext, episode_metrics
+
+
+def recompute_metrics(rec: EpisodeRecord) -> dict[str, float]:
+    """The episode's metrics from its log: trajectory, scenario map and metric context all come from the file."""
+    scenario = scenario_from_yaml(rec.scenario_yaml)
+    return episode_metrics(trajectory_from_record(rec, scenario), MetricContext(**rec.context))
+
+
+def _same(a: float, b: float) -> bool:
+    return (math.isnan(a) and math.isnan(b)) or math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9)
+
+
+def describe(path: str) -> tuple[str, bool]:
+    """A human-readable report of the log; True when the recomputed metrics equal the logged ones."""
+    rec = read_episode(path)
+    recomputed = recompute_metrics(rec)
+    lines = [f"{path}", f"  method {rec.method}, seed {rec.seed}, {rec.positions.shape[1]} robots, "
+             f"{len(rec.time)} steps, {rec.time[-1]:.1f} s"]
+    lines.append("  channels: " + ", ".join(f"{t} ({n})" for t, n in sorted(rec.topics.items())))
+    changes = [0] + [k for k in range(1, len(rec.time)) if not np.array_equal(rec.subteams[k], rec.subteams[k - 1])]
+    lines.append("  subteams over time:")
+    for k in changes[:20]:
+        groups = {int(s): [int(i) for i in np.flatnonzero(rec.subteams[k] == s)] for s in np.unique(rec.subteams[k])}
+        lines.append(f"    t={rec.time[k]:7.1f} s  " + "  ".join(f"{s}: {g}" for s, g in groups.items()))
+    kinds: dict[str, int] = {}
+    for e in rec.events:
+        kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
+    lines.append("  events: " + (", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"))
+    logged = rec.metrics or {}
+    equal = all(_same(recomputed[k], float(logged.get(k, math.nan))) for k in recomputed) if logged else True
+    verdict = ("no logged metrics to compare (a recovered file?)" if not logged
+               else "equal to the logged ones" if equal else "DIFFERENT from the logged ones")
+    lines.append(f"  metrics (recomputed from the log; {verdict}):")
+    for k, v in recomputed.items():
+        mark = "" if not logged or _same(v, float(logged.get(k, math.nan))) else f"   (logged {logged.get(k)})"
+        lines.append(f"    {k:22s} {v:12.4f}{mark}")
+    return "\n".join(lines), equal

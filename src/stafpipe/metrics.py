@@ -1,0 +1,164 @@
+"""Episode metrics: pure functions of a recorded trajectory, the same for a live run and a run read back from MCAP.
+
+STAF (000_f89c49495043d27c.txt) Section 4: SR (robots at their goal without any collision), TT (time until the whole
+team is at its goal), CFI (Appendix D; thresholds sigma = 0.5, 0.1, 0.01, w = 0.5). Cezayirli & Kerestecioglu Fig. 4:
+number of communication links over time; we add the algebraic connectivity lambda2 of the same graph. Where STAF's
+printed CFI is ill-posed we use its evident intent (docs/metrics.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial.distance import cdist
+
+from stafpipe.integrity import formation_integrity
+
+CFI_SIGMAS = (0.5, 0.1, 0.01)  # STAF Table 1 columns
+CFI_WEIGHT = 0.5  # STAF Appendix D: w = 0.5
+
+
+@dataclass
+class Trajectory:
+    """What an episode recorded, step by step (T + 1 samples including the start)."""
+
+    time: np.ndarray
+    """(T+1,) seconds."""
+    positions: np.ndarray
+    """(T+1, n, 2)."""
+    velocities: np.ndarray
+    """(T+1, n, 2)."""
+    subteams: np.ndarray
+    """(T+1, n) int subteam id of each robot (all 0 when the team is whole)."""
+    team_goal: np.ndarray
+    """(n, 2) the team's goal slots (the scenario's goal formation)."""
+    obstacle_distance: np.ndarray
+    """(T+1, n) distance from each robot's surface to the nearest obstacle."""
+    collisions: list[tuple[int, int, int]] = field(default_factory=list)
+    """(step, robot a, robot b or -1 for an obstacle) for every contact that began."""
+
+
+@dataclass
+class MetricContext:
+    """What the metrics need besides the trajectory: the robot, formation and geometry of the scenario."""
+
+    robot_radius: float
+    formation: str
+    spacing: float
+    angle_deg: float
+    heading_deg: float
+    passage_width: float
+    """Narrowest passage on the way (STAF's eta before the safety margin), from geometry.Geometry."""
+    travel_time_lower_bound: float
+    goal_tolerance: float = 0.3
+    sensing_radius: float = 2.0
+    cfi_margin: float = 0.1
+    """Safety margin taken off each side of the passage: eta = passage_width - 2 margin (STAF Sec. 4 'with safety margin')."""
+
+
+def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """Distance of each robot to the goal slot it is matched to (Hungarian, robots interchangeable)."""
+    cost = cdist(pos, goal)
+    rows, cols = linear_sum_assignment(cost)
+    out = np.empty(len(pos))
+    out[rows] = cost[rows, cols]
+    return out
+
+
+def success_rate(traj: Trajectory, ctx: MetricContext) -> float:
+    """SR: fraction of robots within tolerance of a goal slot at the end, that never collided."""
+    at_goal = matched_goal_distance(traj.positions[-1], traj.team_goal) <= ctx.goal_tolerance
+    hit = np.zeros(traj.positions.shape[1], dtype=bool)
+    for _, a, b in traj.collisions:
+        hit[a] = True
+        if b >= 0:
+            hit[b] = True
+    return float(np.mean(at_goal & ~hit))
+
+
+def travel_time(traj: Trajectory, ctx: MetricContext) -> float:
+    """TT: first time at which every robot is within tolerance of a goal slot; NaN if that never happens."""
+    for k in range(len(traj.time)):
+        if matched_goal_distance(traj.positions[k], traj.team_goal).max() <= ctx.goal_tolerance:
+            return float(traj.time[k])
+    return math.nan
+
+
+def _heading(vel: np.ndarray, default: float) -> float:
+    v = vel.mean(axis=0)
+    return math.atan2(v[1], v[0]) if np.linalg.norm(v) > 0.05 else default
+
+
+def cfi_terms(traj: Trajectory, ctx: MetricContext) -> tuple[np.ndarray, np.ndarray]:
+    """Per (sample, subteam): the team's diameter 2 r (r = max distance of a robot's edge from the subteam's centroid)
+    and its integrity epsilon. Returns flat arrays (diameter, epsilon)."""
+    diam, eps = [], []
+    default = math.radians(ctx.heading_deg)
+    for k in range(len(traj.time)):
+        for team in np.unique(traj.subteams[k]):
+            idx = np.flatnonzero(traj.subteams[k] == team)
+            p = traj.positions[k, idx]
+            diam.append(2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius))
+            heading = _heading(traj.velocities[k, idx], default)
+            eps.append(formation_integrity(p, ctx.formation, ctx.spacing, heading, ctx.angle_deg))
+    return np.array(diam), np.array(eps)
+
+
+def cfi(diameter: np.ndarray, epsilon: np.ndarray, eta: float, sigma: float, w: float = CFI_WEIGHT) -> float:
+    """CFI at threshold sigma, averaged over samples and subteams.
+
+    Printed (STAF Sec. 4 / App. D): w (1 - sigma^-1 min(|r - (eta + sigma)|, |r - (eta - sigma)|)) + (1 - w) epsilon.
+    Used: gap = 1 inside the band |2r - eta| <= sigma, falling linearly to 0 one sigma outside it, i.e.
+    clip(1 - max(0, |2r - eta| - sigma) / sigma, 0, 1); see docs/metrics.md for why.
+    """
+    gap = np.clip(1.0 - np.maximum(0.0, np.abs(diameter - eta) - sigma) / sigma, 0.0, 1.0)
+    return float(np.mean(w * gap + (1.0 - w) * epsilon))
+
+
+def connectivity(positions: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample: number of undirected links within `radius` and algebraic connectivity lambda2 of that graph."""
+    links, lam2 = [], []
+    for p in positions:
+        d = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        adj = (d <= radius) & ~np.eye(len(p), dtype=bool)
+        links.append(int(adj.sum() // 2))
+        lap = np.diag(adj.sum(axis=1)) - adj.astype(float)
+        lam2.append(max(0.0, float(np.sort(np.linalg.eigvalsh(lap))[1])) if len(p) > 1 else 0.0)
+    return np.array(links), np.array(lam2)
+
+
+def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
+    """Every metric of one episode, as a flat dict (one row of the results table)."""
+    eta = ctx.passage_width - 2.0 * ctx.cfi_margin
+    diam, eps = cfi_terms(traj, ctx)
+    links, lam2 = connectivity(traj.positions, ctx.sensing_radius)
+    pos = traj.positions
+    n = pos.shape[1]
+    gaps = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1) + np.eye(n)[None] * 1e9
+    tt = travel_time(traj, ctx)
+    out = {
+        "sr": success_rate(traj, ctx),
+        "tt": tt,
+        "tt_lower_bound": ctx.travel_time_lower_bound,
+        "tt_ratio": tt / ctx.travel_time_lower_bound if ctx.travel_time_lower_bound > 0 else math.nan,
+        "eta": eta,
+        "formation_integrity": float(eps.mean()),
+        "collisions": float(len(traj.collisions)),
+        "robot_collisions": float(sum(1 for c in traj.collisions if c[2] >= 0)),
+        "obstacle_collisions": float(sum(1 for c in traj.collisions if c[2] < 0)),
+        "min_robot_gap": float(gaps.min() - 2 * ctx.robot_radius),
+        "min_obstacle_distance": float(traj.obstacle_distance.min()),
+        "path_length": float(np.linalg.norm(np.diff(pos, axis=0), axis=2).sum(axis=0).mean()),
+        "links_mean": float(links.mean()),
+        "links_min": float(links.min()),
+        "lambda2_mean": float(lam2.mean()),
+        "lambda2_min": float(lam2.min()),
+        "subteams_max": float(max(len(np.unique(s)) for s in traj.subteams)),
+        "duration": float(traj.time[-1]),
+    }
+    for sigma in CFI_SIGMAS:
+        out[f"cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
+    return out

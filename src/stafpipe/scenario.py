@@ -1,0 +1,253 @@
+"""Scenarios: validated data from YAML (docs/scenarios.md), built in (conf/scenario/) or given by path.
+
+A scenario holds the world bounds (walls), static obstacles, optional moving obstacles, the team (size, formation,
+start and goal centres, heading), the robot, and a time limit. `load_scenario` checks every field and names the bad one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from omegaconf import OmegaConf
+from omegaconf.errors import OmegaConfBaseException
+
+from stafpipe.errors import StafpipeError
+from stafpipe.formations import FORMATION_TYPES
+
+DRIVES = ("holonomic", "diff_drive")
+
+
+class ScenarioError(StafpipeError):
+    """A scenario file or config is malformed; the message names the field."""
+
+
+@dataclass
+class WorldBounds:
+    """The rectangle the robots live in; its sides are walls."""
+
+    xmin: float = 0.0
+    ymin: float = 0.0
+    xmax: float = 30.0
+    ymax: float = 12.0
+
+
+@dataclass
+class TeamSpec:
+    """The team: size, formation template, start and goal formation centres, facing direction."""
+
+    n: int = 10
+    formation: str = "circle"
+    spacing: float = 1.0
+    angle_deg: float = 90.0
+    start: list[float] = field(default_factory=lambda: [4.0, 6.0])
+    goal: list[float] = field(default_factory=lambda: [26.0, 6.0])
+    heading_deg: float = 0.0
+
+
+@dataclass
+class RobotSpec:
+    """A disc robot (STAF Gazebo robots are holonomic; Warthog and Limo are differential drive, STAF Section 4)."""
+
+    radius: float = 0.2
+    max_speed: float = 1.0
+    max_accel: float = 2.0
+    drive: str = "holonomic"
+    max_turn_rate: float = 2.0
+    """Differential drive only: the largest angular velocity, rad/s."""
+
+
+@dataclass
+class MovingObstacle:
+    """A disc moving along waypoints at constant speed (Zhu et al. 2019, Scenario 1: a walking human)."""
+
+    radius: float = 0.3
+    speed: float = 0.5
+    waypoints: list[Any] = field(default_factory=list)
+    loop: bool = True
+
+
+@dataclass
+class ScenarioConfig:
+    """A scenario (group `scenario`): inline fields, or `path` to a scenario YAML file that replaces them."""
+
+    name: str = "corridor"
+    path: str | None = None
+    world: WorldBounds = field(default_factory=WorldBounds)
+    obstacles: list[Any] = field(default_factory=list)
+    moving_obstacles: list[MovingObstacle] = field(default_factory=list)
+    reference_path: list[Any] = field(default_factory=list)
+    """Optional waypoints for the formation centre (a leader's trajectory, Zhu's circular reference)."""
+    team: TeamSpec = field(default_factory=TeamSpec)
+    robot: RobotSpec = field(default_factory=RobotSpec)
+    time_limit: float = 200.0
+    """Seconds before an episode is cut off."""
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """A static obstacle piece: the set of points within `radius` of segment a-b (a == b is a disc)."""
+
+    a: tuple[float, float]
+    b: tuple[float, float]
+    radius: float
+
+
+@dataclass
+class Scenario:
+    """A validated scenario with its obstacles in geometric form."""
+
+    spec: ScenarioConfig
+    polygons: list[np.ndarray]
+    """Solid convex-or-not polygons (boxes included), each (k, 2), counter-clockwise."""
+    capsules: list[Capsule]
+    """Every static obstacle boundary as capsules: polygon edges (radius 0), circles, segments, world walls."""
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+
+def _vec2(value: Any, where: str) -> tuple[float, float]:
+    ok = isinstance(value, list | tuple) and len(value) == 2 and all(isinstance(v, int | float) for v in value)
+    if not ok or not all(math.isfinite(v) for v in value):
+        raise ScenarioError(f"{where} must be two numbers [x, y], got {value!r}")
+    return float(value[0]), float(value[1])
+
+
+def _positive(value: Any, where: str) -> float:
+    if not isinstance(value, int | float) or not value > 0 or not math.isfinite(value):
+        raise ScenarioError(f"{where} must be a positive number, got {value!r}")
+    return float(value)
+
+
+def _obstacle(item: Any, where: str) -> tuple[np.ndarray | None, list[Capsule]]:
+    kinds = ("box", "polygon", "circle", "segment")
+    if not isinstance(item, dict) or len(item) != 1 or next(iter(item)) not in kinds:
+        raise ScenarioError(f"{where} must be one of {{box: ..}}, {{polygon: ..}}, {{circle: ..}}, {{segment: ..}}, got {item!r}")
+    kind, body = next(iter(item.items()))
+    where = f"{where}.{kind}"
+    if kind == "box":
+        _keys(body, {"center", "size"}, {"angle_deg"}, where)
+        cx, cy = _vec2(body["center"], f"{where}.center")
+        w, h = _vec2(body["size"], f"{where}.size")
+        _positive(w, f"{where}.size[0]"), _positive(h, f"{where}.size[1]")
+        a = math.radians(float(body.get("angle_deg", 0.0)))
+        corners = np.array([[-w, -h], [w, -h], [w, h], [-w, h]]) / 2.0
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        poly = corners @ rot.T + (cx, cy)
+    elif kind == "polygon":
+        if not isinstance(body, list) or len(body) < 3:
+            raise ScenarioError(f"{where} must be a list of at least 3 points, got {body!r}")
+        poly = np.array([_vec2(p, f"{where}[{i}]") for i, p in enumerate(body)])
+        area = 0.5 * float(np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1]))
+        if abs(area) < 1e-9:
+            raise ScenarioError(f"{where} has zero area")
+        if area < 0:
+            poly = poly[::-1]
+    elif kind == "circle":
+        _keys(body, {"center", "radius"}, set(), where)
+        c = _vec2(body["center"], f"{where}.center")
+        return None, [Capsule(c, c, _positive(body["radius"], f"{where}.radius"))]
+    else:
+        _keys(body, {"a", "b"}, {"radius"}, where)
+        radius = float(body.get("radius", 0.05))
+        if radius < 0:
+            raise ScenarioError(f"{where}.radius must be >= 0, got {radius}")
+        return None, [Capsule(_vec2(body["a"], f"{where}.a"), _vec2(body["b"], f"{where}.b"), radius)]
+    edges = [Capsule(tuple(poly[i]), tuple(poly[(i + 1) % len(poly)]), 0.0) for i in range(len(poly))]
+    return poly, edges
+
+
+def _keys(body: Any, required: set[str], optional: set[str], where: str) -> None:
+    if not isinstance(body, dict):
+        raise ScenarioError(f"{where} must be a mapping, got {body!r}")
+    missing, unknown = required - set(body), set(body) - required - optional
+    if missing:
+        raise ScenarioError(f"{where} misses {sorted(missing)}")
+    if unknown:
+        raise ScenarioError(f"{where} has unknown key(s) {sorted(unknown)}; allowed: {sorted(required | optional)}")
+
+
+def _check(spec: ScenarioConfig) -> None:
+    w = spec.world
+    if not (w.xmax > w.xmin and w.ymax > w.ymin):
+        raise ScenarioError(f"world must have xmax > xmin and ymax > ymin, got {w}")
+    t, r = spec.team, spec.robot
+    if t.n < 1:
+        raise ScenarioError(f"team.n must be >= 1, got {t.n}")
+    if t.formation not in FORMATION_TYPES:
+        raise ScenarioError(f"team.formation must be one of {list(FORMATION_TYPES)}, got {t.formation!r}")
+    _positive(t.spacing, "team.spacing")
+    for key in ("start", "goal"):
+        x, y = _vec2(list(getattr(t, key)), f"team.{key}")
+        if not (w.xmin < x < w.xmax and w.ymin < y < w.ymax):
+            raise ScenarioError(f"team.{key} {[x, y]} lies outside the world {w}")
+    for key in ("radius", "max_speed", "max_accel", "max_turn_rate"):
+        _positive(getattr(r, key), f"robot.{key}")
+    if r.drive not in DRIVES:
+        raise ScenarioError(f"robot.drive must be one of {list(DRIVES)}, got {r.drive!r}")
+    if t.spacing < 2 * r.radius:
+        raise ScenarioError(f"team.spacing ({t.spacing}) must be at least the robot diameter ({2 * r.radius})")
+    _positive(spec.time_limit, "time_limit")
+    for j, p in enumerate(spec.reference_path):
+        _vec2(list(p), f"reference_path[{j}]")
+    for i, m in enumerate(spec.moving_obstacles):
+        _positive(m.radius, f"moving_obstacles[{i}].radius"), _positive(m.speed, f"moving_obstacles[{i}].speed")
+        if len(m.waypoints) < 1:
+            raise ScenarioError(f"moving_obstacles[{i}].waypoints needs at least one point")
+        for j, p in enumerate(m.waypoints):
+            _vec2(list(p), f"moving_obstacles[{i}].waypoints[{j}]")
+
+
+def build_scenario(spec: ScenarioConfig) -> Scenario:
+    """Validate `spec` and turn its obstacles into polygons and capsules."""
+    _check(spec)
+    polygons: list[np.ndarray] = []
+    capsules: list[Capsule] = []
+    for i, item in enumerate(spec.obstacles):
+        poly, caps = _obstacle(OmegaConf.to_container(item) if OmegaConf.is_config(item) else item, f"obstacles[{i}]")
+        if poly is not None:
+            polygons.append(poly)
+        capsules.extend(caps)
+    w = spec.world
+    corners = [(w.xmin, w.ymin), (w.xmax, w.ymin), (w.xmax, w.ymax), (w.xmin, w.ymax)]
+    capsules.extend(Capsule(corners[i], corners[(i + 1) % 4], 0.0) for i in range(4))
+    return Scenario(spec, polygons, capsules)
+
+
+def load_scenario_file(path: str | Path) -> ScenarioConfig:
+    """Read a scenario YAML file into a typed ScenarioConfig; errors name the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"scenario file {path} does not exist")
+    try:
+        raw = OmegaConf.load(path)
+        merged = OmegaConf.merge(OmegaConf.structured(ScenarioConfig), raw)
+    except OmegaConfBaseException as exc:
+        key = getattr(exc, "full_key", None)
+        raise ScenarioError(f"scenario file {path}: bad field {key!r}: {str(exc).splitlines()[0]}") from None
+    except Exception as exc:  # noqa: BLE001 - a YAML syntax error
+        raise ScenarioError(f"scenario file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    spec: ScenarioConfig = OmegaConf.to_object(merged)  # type: ignore[assignment]
+    spec.path = None
+    return spec
+
+
+def resolve_scenario(cfg: Any) -> Scenario:
+    """The scenario of a `scenario` config node: its inline fields, or the file at `scenario.path`."""
+    if cfg.get("path"):
+        spec = load_scenario_file(cfg.path)
+    else:
+        try:
+            spec = OmegaConf.to_object(cfg) if OmegaConf.is_config(cfg) else cfg
+        except OmegaConfBaseException as exc:
+            raise ScenarioError(f"scenario: {str(exc).splitlines()[0]}") from None
+    try:
+        return build_scenario(spec)
+    except ScenarioError as exc:
+        where = f"scenario file {cfg.path}" if cfg.get("path") else f"scenario '{spec.name}'"
+        raise ScenarioError(f"{where}: {exc}") from None

@@ -1,0 +1,256 @@
+"""The simulated world: disc robots and obstacles in pymunk, B independent worlds stepped as one batch.
+
+Each world owns one pymunk Space. A batch of B worlds behaves exactly like B single worlds (a test checks it): every
+world has its own Space and its own random generator, and the batch only stacks their states to compute drives and
+observations vectorized. Velocities go in and states come out through pymunk's batch API, not per-body attributes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pymunk
+import pymunk.batch as pb
+from pymunk._chipmunk import lib as _cp
+
+from stafpipe.drives import DRIVES
+from stafpipe.formations import formation_slots, place
+from stafpipe.geometry import capsule_arrays
+from stafpipe.scenario import Scenario
+from stafpipe.sensing import Observation, SensingConfig, observe
+
+ROBOT, STATIC, MOVING = 1, 2, 3
+_STATE_FIELDS = pb.BodyFields.POSITION | pb.BodyFields.VELOCITY
+_FAR = 1e6  # padding capsules of worlds with fewer obstacles lie here
+
+
+@dataclass
+class WorldConfig:
+    """Simulation settings (section `world`)."""
+
+    control_dt: float = 0.1
+    """Control period in seconds (one `step`)."""
+    substeps: int = 4
+    """Physics substeps per control period: 4 keep robot-robot overlaps to a few cm (PERFORMANCE-NOTES)."""
+    collision_slop: float = 0.005
+    """pymunk's allowed overlap; the default 0.1 lets robots leave walled boxes (PERFORMANCE-NOTES)."""
+    start_noise: float = 0.05
+    """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
+
+
+@dataclass
+class Collision:
+    """A contact that began during a step: robot `a` with robot `b`, or with an obstacle (`b` = -1)."""
+
+    a: int
+    b: int
+
+
+@dataclass
+class _Space:
+    """One pymunk space with the bodies of one world."""
+
+    space: pymunk.Space
+    robots: list[pymunk.Body]
+    movers: list[pymunk.Body]
+    robot_of: dict[pymunk.Shape, int]
+    velocity_rows: np.ndarray
+    """(bodies, 2): the velocities handed to pymunk, one row per body the batch API iterates."""
+    set_buf: pb.Buffer
+    """Wraps `velocity_rows`' memory (never grown by pymunk: set only reads it)."""
+    events: list[Collision] = field(default_factory=list)
+
+    def step(self, dt: float, substeps: int) -> None:
+        """Hand the velocities to pymunk and advance `substeps` substeps of `dt / substeps`."""
+        pb.set_space_bodies(self.space, pb.BodyFields.VELOCITY, self.set_buf)
+        # Space.step only adds deferred add/remove and post-step callbacks (unused here) around cpSpaceStep;
+        # calling it directly halves the per-substep cost. Space.step ran once at build time to check the bodies.
+        handle = self.space._space  # noqa: SLF001
+        for _ in range(substeps):
+            _cp.cpSpaceStep(handle, dt / substeps)
+
+
+def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
+    space = pymunk.Space()
+    space.collision_slop = cfg.collision_slop
+    r = scenario.spec.robot.radius
+    robots, robot_of = [], {}
+    for i in range(n):
+        body = pymunk.Body(1.0, math.inf)
+        shape = pymunk.Circle(body, r)
+        shape.collision_type, shape.friction, shape.elasticity = ROBOT, 0.0, 0.0
+        space.add(body, shape)
+        robots.append(body)
+        robot_of[shape] = i
+    for poly in scenario.polygons:
+        parts = [poly]
+        if len(pymunk.Poly(None, poly.tolist()).get_vertices()) != len(poly):  # concave: split into convex parts
+            parts = [np.array(p) for p in pymunk.autogeometry.convex_decomposition(poly.tolist() + [poly[0].tolist()], 0.01)]
+        for part in parts:
+            shape = pymunk.Poly(space.static_body, [tuple(p) for p in part])
+            shape.collision_type = STATIC
+            space.add(shape)
+    for cap in scenario.capsules:
+        shape = pymunk.Segment(space.static_body, cap.a, cap.b, cap.radius)
+        shape.collision_type = STATIC
+        space.add(shape)
+    movers = []
+    for m in scenario.spec.moving_obstacles:
+        body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        shape = pymunk.Circle(body, m.radius)
+        shape.collision_type = MOVING
+        space.add(body, shape)
+        movers.append(body)
+    probe = pb.Buffer()  # how many bodies the batch API iterates (robots first, then movers, then the static body)
+    pb.get_space_bodies(space, pb.BodyFields.BODY_ID, probe)
+    ids = np.frombuffer(probe.int_buf(), dtype=np.uintp)
+    if list(ids[: n + len(movers)]) != [b.id for b in robots + movers]:
+        raise RuntimeError("pymunk iterates bodies in an unexpected order")
+    rows = np.zeros((len(ids), 2))
+    set_buf = pb.Buffer()
+    set_buf.set_float_buf(rows.reshape(-1))
+    space.step(1e-9)  # lets pymunk validate the bodies once; nothing moves
+    out = _Space(space, robots, movers, robot_of, rows, set_buf)
+
+    def robot_robot(arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
+        a, b = (robot_of[s] for s in arbiter.shapes)
+        out.events.append(Collision(min(a, b), max(a, b)))
+
+    def robot_obstacle(arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
+        out.events.append(Collision(robot_of[arbiter.shapes[0]], -1))
+
+    space.on_collision(ROBOT, ROBOT, begin=robot_robot)
+    space.on_collision(ROBOT, STATIC, begin=robot_obstacle)
+    space.on_collision(ROBOT, MOVING, begin=robot_obstacle)
+    return out
+
+
+class Worlds:
+    """B independent worlds of the same team size; `Worlds([scenario])` is one world."""
+
+    def __init__(self, scenarios: list[Scenario], sensing: SensingConfig | None = None, cfg: WorldConfig | None = None):
+        self.cfg = cfg or WorldConfig()
+        self.sensing = sensing or SensingConfig()
+        self.scenarios = scenarios
+        self.n = scenarios[0].spec.team.n
+        if any(s.spec.team.n != self.n for s in scenarios):
+            raise ValueError("all worlds of a batch need the same team size")
+        self.robot = scenarios[0].spec.robot
+        if any(s.spec.robot != self.robot for s in scenarios):
+            raise ValueError("all worlds of a batch need the same robot")
+        self.drive = DRIVES[self.robot.drive]
+        self.spaces = [_build_space(s, self.n, self.cfg) for s in scenarios]
+        caps = [capsule_arrays(s) for s in scenarios]
+        c_max = max(len(c[2]) for c in caps) + max(len(s.spec.moving_obstacles) for s in scenarios)
+        b = len(scenarios)
+        self.seg_a = np.full((b, c_max, 2), _FAR)
+        self.seg_b = np.full((b, c_max, 2), _FAR)
+        self.seg_r = np.zeros((b, c_max))
+        for w, (a, bb, r) in enumerate(caps):
+            self.seg_a[w, : len(r)], self.seg_b[w, : len(r)], self.seg_r[w, : len(r)] = a, bb, r
+        self._mover_slots = [(len(c[2]), s.spec.moving_obstacles) for c, s in zip(caps, scenarios, strict=True)]
+        self.pos = np.zeros((b, self.n, 2))
+        self.vel = np.zeros((b, self.n, 2))
+        self.heading = np.zeros((b, self.n))
+        self.goal = np.zeros((b, self.n, 2))
+        self.time = np.zeros(b)
+        self.collided = np.zeros((b, self.n), dtype=bool)
+        self.rngs = [np.random.default_rng(0) for _ in scenarios]
+        self._mover_state: list[list[tuple[np.ndarray, int]]] = [[] for _ in scenarios]
+        self._get_buf = pb.Buffer()  # pymunk-owned, grown by get_space_bodies; never wraps our memory
+
+    @property
+    def size(self) -> int:
+        """Number of worlds B."""
+        return len(self.spaces)
+
+    def reset(self, seeds: list[int], formations: list[np.ndarray] | None = None) -> Observation:
+        """Start every world from its scenario's start formation, perturbed by its seed.
+
+        `formations` optionally gives each world's template slots (n, 2) instead of the scenario's own formation.
+        """
+        for w, (seed, sc) in enumerate(zip(seeds, self.scenarios, strict=True)):
+            team = sc.spec.team
+            slots = formations[w] if formations is not None else formation_slots(team.formation, self.n, team.spacing, team.angle_deg)
+            h = math.radians(team.heading_deg)
+            rng = np.random.default_rng(seed)
+            self.rngs[w] = rng
+            jitter = np.clip(rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise)
+            self.pos[w] = place(slots, team.start, h) + jitter
+            self.goal[w] = place(slots, team.goal, h)
+            self.vel[w] = 0.0
+            self.heading[w] = h
+            self.time[w] = 0.0
+            self.collided[w] = False
+            sp = self.spaces[w]
+            for i, body in enumerate(sp.robots):
+                body.position = tuple(self.pos[w, i])
+                body.velocity = (0.0, 0.0)
+            self._mover_state[w] = []
+            for body, m in zip(sp.movers, sc.spec.moving_obstacles, strict=True):
+                body.position = tuple(m.waypoints[0])
+                self._mover_state[w].append((np.array(m.waypoints, dtype=float), 1 % len(m.waypoints)))
+            sp.events.clear()
+        self._update_movers()
+        return self.observe()
+
+    def _update_movers(self) -> None:
+        for w, (first, specs) in enumerate(self._mover_slots):
+            for k, (body, m) in enumerate(zip(self.spaces[w].movers, specs, strict=True)):
+                p = np.array(body.position)
+                self.seg_a[w, first + k] = self.seg_b[w, first + k] = p
+                self.seg_r[w, first + k] = m.radius
+
+    def _mover_velocity(self, w: int, k: int, body: pymunk.Body) -> tuple[float, float]:
+        waypoints, target = self._mover_state[w][k]
+        m = self.scenarios[w].spec.moving_obstacles[k]
+        p = np.array(body.position)
+        delta = waypoints[target] - p
+        dist = float(np.linalg.norm(delta))
+        if dist < m.speed * self.cfg.control_dt:  # reached: head for the next waypoint (or stop at the last)
+            if target + 1 < len(waypoints) or m.loop:
+                self._mover_state[w][k] = (waypoints, (target + 1) % len(waypoints))
+            return (delta[0] / self.cfg.control_dt, delta[1] / self.cfg.control_dt)
+        return tuple(delta / dist * m.speed)
+
+    def step(self, actions: np.ndarray) -> tuple[Observation, list[list[Collision]]]:
+        """Apply commanded planar velocities (B, n, 2) for one control period.
+
+        Returns the new observations and, per world, the contacts that began during the step.
+        """
+        dt = self.cfg.control_dt
+        self.vel, self.heading = self.drive(np.asarray(actions, float), self.vel, self.heading, self.robot, dt)
+        events: list[list[Collision]] = []
+        for w, sp in enumerate(self.spaces):
+            sp.velocity_rows[: self.n] = self.vel[w]
+            for k, body in enumerate(sp.movers):
+                sp.velocity_rows[self.n + k] = self._mover_velocity(w, k, body)
+            sp.step(dt, self.cfg.substeps)
+            self._get_buf.clear()
+            pb.get_space_bodies(sp.space, _STATE_FIELDS, self._get_buf)
+            state = np.frombuffer(self._get_buf.float_buf()).reshape(-1, 4)
+            self.pos[w] = state[: self.n, :2]
+            self.vel[w] = state[: self.n, 2:]
+            events.append(sp.events)
+            for e in sp.events:
+                self.collided[w, e.a] = True
+                if e.b >= 0:
+                    self.collided[w, e.b] = True
+            sp.events = []
+        self.time += dt
+        if any(self._mover_slots[w][1] for w in range(self.size)):
+            self._update_movers()
+        return self.observe(), events
+
+    def observe(self) -> Observation:
+        """Observations of every robot of every world."""
+        return observe(
+            self.pos, self.vel, self.heading, self.goal, self.time.copy(),
+            self.seg_a, self.seg_b, self.seg_r, self.robot.radius, self.sensing, self.rngs,
+        )
+
+    def mover_positions(self, w: int) -> np.ndarray:
+        """Positions (M, 2) of world w's moving obstacles."""
+        return np.array([tuple(b.position) for b in self.spaces[w].movers]).reshape(-1, 2)

@@ -1,0 +1,77 @@
+import math
+
+import numpy as np
+import pytest
+
+from stafpipe.formations import formation_slots, place
+from stafpipe.integrity import circle_integrity, formation_integrity, line_integrity, v_integrity
+from stafpipe.metrics import MetricContext, Trajectory, cfi, connectivity, episode_metrics, success_rate, travel_time
+
+
+@pytest.mark.parametrize("n", [3, 4, 7, 10])
+@pytest.mark.parametrize("kind", ["circle", "wedge", "line", "square", "t", "v"])
+def test_perfect_formations_score_one(kind, n) -> None:
+    heading = 0.7
+    p = place(formation_slots(kind, n, 1.2, 120.0), (3.0, -2.0), heading)
+    assert formation_integrity(p, kind, 1.2, heading, 120.0) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_more_distortion_scores_less() -> None:
+    rng = np.random.default_rng(0)
+    for kind in ("circle", "wedge", "line", "square"):
+        mean = {
+            s: np.mean([formation_integrity(formation_slots(kind, 9, 1.0) + rng.normal(0, s, (9, 2)), kind, 1.0, 0.0)
+                        for _ in range(50)])
+            for s in (0.02, 0.1, 0.3)
+        }
+        assert 1.0 > mean[0.02] > mean[0.1] > mean[0.3], (kind, mean)
+
+
+def test_integrity_known_values() -> None:
+    # A line with gaps 1 and 3: ideal gap 2, mean deviation 1 -> 1 - 1/2.
+    assert line_integrity(np.array([[0.0, 0.0], [0.0, 1.0], [0.0, 4.0]])) == pytest.approx(0.5)
+    # A square scored as a circle of 4: every interior angle is the ideal 90 degrees.
+    assert circle_integrity(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)) == pytest.approx(1.0)
+    # A wedge with one arm twice as long: 1 - 2 |1 - 2| / 3 - |2 L_m - L_b| / L_b.
+    apex, lb, rb = np.array([0.0, 0.0]), np.array([-1.0, 1.0]), np.array([-2.0, -2.0])
+    l_l, l_r, l_b = math.sqrt(2), math.sqrt(8), math.dist(lb, rb)
+    l_m = np.linalg.norm((lb + rb) / 2 - apex)
+    expected = 1 - 2 * abs(l_l - l_r) / (l_l + l_r) - abs(2 * l_m - l_b) / l_b
+    assert v_integrity(np.stack([apex, lb, rb]), 0.0) == pytest.approx(max(0.0, expected))
+
+
+def test_cfi_gap_band() -> None:
+    eps = np.array([1.0])
+    assert cfi(np.array([2.0]), eps, eta=2.0, sigma=0.1) == pytest.approx(1.0)
+    assert cfi(np.array([2.15]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5 * 0.5 + 0.5)
+    assert cfi(np.array([3.0]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5)
+
+
+def test_connectivity_of_a_line_graph() -> None:
+    n = 6
+    links, lam2 = connectivity(np.stack([np.arange(n) * 1.0, np.zeros(n)], 1)[None], radius=1.5)
+    assert links[0] == n - 1
+    assert lam2[0] == pytest.approx(2 * (1 - math.cos(math.pi / n)))
+
+
+def _traj(final_offset: float, collisions=()):
+    goal = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    t = np.arange(5) * 0.1
+    pos = np.stack([goal + (4 - k) * np.array([1.0, 0.0]) for k in range(5)])
+    pos[-1, 2] += final_offset
+    z = np.zeros((5, 3))
+    return Trajectory(t, pos, np.zeros_like(pos), z.astype(int), goal, z + 1.0, list(collisions))
+
+
+CTX = MetricContext(0.2, "line", 1.0, 90.0, 0.0, passage_width=3.0, travel_time_lower_bound=0.2)
+
+
+def test_success_rate_and_travel_time() -> None:
+    assert success_rate(_traj(0.0), CTX) == 1.0
+    assert travel_time(_traj(0.0), CTX) == pytest.approx(0.4)
+    assert success_rate(_traj(1.0), CTX) == pytest.approx(2 / 3)
+    assert math.isnan(travel_time(_traj(1.0), CTX))
+    assert success_rate(_traj(0.0, [(2, 0, 1)]), CTX) == pytest.approx(1 / 3)
+    assert success_rate(_traj(0.0, [(2, 2, -1)]), CTX) == pytest.approx(2 / 3)
+    m = episode_metrics(_traj(0.0), CTX)
+    assert m["tt_ratio"] == pytest.approx(2.0) and m["collisions"] == 0 and m["path_length"] == pytest.approx(4.0)

@@ -1,0 +1,85 @@
+from pathlib import Path
+
+import pytest
+
+from stafpipe.geometry import Geometry, path_length
+from stafpipe.launch import launch
+from stafpipe.paths import conf_dir
+from stafpipe.scenario import ScenarioError, build_scenario, load_scenario_file
+from stafpipe.world import Worlds
+
+DATA = Path(__file__).parent / "data"
+BUILT_IN = sorted(p.stem for p in (conf_dir() / "scenario").glob("*.yaml"))
+
+
+def test_library_holds_the_issue_scenarios() -> None:
+    assert set(BUILT_IN) >= {"corridor", "bridge", "doorway", "narrowing", "multi_passage", "bollards", "forest",
+                             "zhu_moving_obstacle", "zhu_corridor16", "cezayirli_corridors"}
+
+
+@pytest.mark.parametrize("name", BUILT_IN)
+def test_every_built_in_scenario_builds_and_steps(name) -> None:
+    sc = build_scenario(load_scenario_file(conf_dir() / "scenario" / f"{name}.yaml"))
+    worlds = Worlds([sc])
+    worlds.reset([0])
+    for _ in range(3):
+        obs, _ = worlds.step(worlds.goal - worlds.pos)
+    assert obs.position.shape == (1, sc.spec.team.n, 2)
+    assert (obs.obstacle_distance > -0.05).all()
+
+
+@pytest.mark.parametrize(("name", "width"), [("corridor", 2.4), ("bridge", 1.6), ("doorway", 1.5), ("bollards", 1.1),
+                                             ("narrowing", 2.0), ("multi_passage", 3.0), ("zhu_corridor16", 2.0)])
+def test_narrowest_passage_is_derived_from_geometry(name, width) -> None:
+    sc = build_scenario(load_scenario_file(conf_dir() / "scenario" / f"{name}.yaml"))
+    g = Geometry(sc)
+    eta = g.passage_width(tuple(sc.spec.team.start), tuple(sc.spec.team.goal))
+    assert eta == pytest.approx(width, abs=2.5 * g.resolution)
+
+
+def test_shortest_path_goes_around_an_obstacle() -> None:
+    sc = build_scenario(load_scenario_file(conf_dir() / "scenario" / "zhu_corridor16.yaml"))
+    path = Geometry(sc).shortest_path((4.0, 8.0), (36.0, 8.0), 0.2)
+    # The 2 m box at (12, 8) blocks the straight line: the path detours, but by less than going over its corner.
+    assert 32.0 < path_length(path) < 32.0 + 2 * (2**0.5 - 1) * 1.2 + 0.2
+
+
+def test_issue_example_loads_and_runs_as_written(workdir) -> None:
+    code = launch("eval", [f"scenario.path={DATA / 's_example.yaml'}", "eval.episodes=1"])
+    assert code == 0
+    [results] = list(workdir.glob("outputs/eval/*/*/results.csv"))
+    assert "s_example" in results.read_text()
+
+
+BAD = {
+    "team:\n  n: ten\n": "team.n",
+    "obstacles:\n  - box: {center: [1, 1], size: [-1, 2]}\n": "obstacles[0].box.size[0]",
+    "obstacles:\n  - hexagon: {center: [1, 1]}\n": "obstacles[0]",
+    "obstacles:\n  - polygon: [[0, 0], [1, 1]]\n": "obstacles[0].polygon",
+    "obstacles:\n  - circle: {center: [1, 1], radius: 1, colour: red}\n": "obstacles[0].circle",
+    "robot: {drive: hovercraft}\n": "robot.drive",
+    "robot: {radius: -0.2}\n": "robot.radius",
+    "team: {start: [99.0, 6.0]}\n": "team.start",
+    "team: {formation: blob}\n": "team.formation",
+    "time_limit: 0\n": "time_limit",
+    "colour: blue\n": "colour",
+    "world: {xmin: 5, xmax: 1}\n": "world",
+    "obstacles: [\n": "not valid YAML",
+}
+
+
+@pytest.mark.parametrize("text", list(BAD))
+def test_malformed_scenario_names_the_field(tmp_path, text) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError) as err:
+        build_scenario(load_scenario_file(path))
+    assert BAD[text] in str(err.value)
+
+
+def test_malformed_scenario_through_the_cli_exits_2_and_leaves_nothing(workdir, capsys) -> None:
+    bad = workdir / "bad.yaml"
+    bad.write_text("robot: {drive: hovercraft}\n")
+    assert launch("eval", [f"scenario.path={bad}"]) == 2
+    assert "robot.drive" in capsys.readouterr().err
+    assert not list(workdir.rglob("results.parquet")) and not list(workdir.rglob("*.mcap"))
