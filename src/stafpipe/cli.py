@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import sys
-
 import typer
 
 from stafpipe.errors import StafpipeError
@@ -101,8 +99,3 @@ def inspect(
     typer.echo(report)
     if not equal:
         raise typer.Exit(1)
-
-
-def main() -> None:  # pragma: no cover - console entry for `python -m stafpipe`
-    app(prog_name="stafpipe")
-    sys.exit(0)
