@@ -14,7 +14,6 @@ from omegaconf import OmegaConf
 
 from stafpipe.controllers import Controller, TeamInfo
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
-from stafpipe.formations import formation_slots
 from stafpipe.geometry import Geometry, closest_points, capsule_arrays, path_length
 from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, build_scenario
@@ -31,12 +30,6 @@ def scenario_from_yaml(text: str) -> Scenario:
     """Rebuild a scenario from `scenario_yaml` text."""
     spec = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(ScenarioConfig), OmegaConf.create(text)))
     return build_scenario(spec)  # type: ignore[arg-type]
-
-
-def team_template(scenario: Scenario) -> np.ndarray:
-    """The scenario team's formation slots (formation frame)."""
-    t = scenario.spec.team
-    return formation_slots(t.formation, t.n, t.spacing, t.angle_deg)
 
 
 def episode_context(scenario: Scenario, geometry: Geometry, sensing: SensingConfig, goal_tolerance: float,
@@ -89,7 +82,7 @@ def run_episode(scenario: Scenario, geometry: Geometry, controller: Controller, 
     ctx, path = episode_context(scenario, geometry, sensing, goal_tolerance, cfi_margin)
     worlds = Worlds([scenario], sensing, world_cfg)
     obs = worlds.reset([seed]).world(0)
-    controller.reset(TeamInfo(scenario, obs.position.copy(), worlds.goal[0].copy(), team_template(scenario), path,
+    controller.reset(TeamInfo(scenario, obs.position.copy(), worlds.goal[0].copy(), scenario.template(), path,
                               ctx.passage_width))
     log = EpisodeLogWriter(log_path) if log_path else None
     if log:

@@ -16,7 +16,7 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from stafpipe.errors import StafpipeError
-from stafpipe.formations import FORMATION_TYPES
+from stafpipe.formations import FORMATION_TYPES, formation_slots
 
 DRIVES = ("holonomic", "diff_drive")
 
@@ -109,6 +109,11 @@ class Scenario:
     @property
     def name(self) -> str:
         return self.spec.name
+
+    def template(self) -> np.ndarray:
+        """The team's formation slots (n, 2) in the formation frame."""
+        t = self.spec.team
+        return formation_slots(t.formation, t.n, t.spacing, t.angle_deg)
 
 
 def _vec2(value: Any, where: str) -> tuple[float, float]:

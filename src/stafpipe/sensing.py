@@ -71,9 +71,8 @@ def occluded(rel: np.ndarray, dist: np.ndarray, radius: float) -> np.ndarray:
     gap = np.abs((ang[..., :, :, None] - ang[..., :, None, :] + np.pi) % (2 * np.pi) - np.pi)  # [i, j, k]
     overlap = gap < half[..., :, :, None] + half[..., :, None, :]
     nearer = dist[..., :, None, :] < dist[..., :, :, None]
-    n = rel.shape[-2]
-    not_self = ~np.eye(n, dtype=bool)
-    blocks = overlap & nearer & not_self[:, None, :] & not_self[None, :, :] & ~np.eye(n, dtype=bool)[None, :, :]
+    not_self = ~np.eye(rel.shape[-2], dtype=bool)
+    blocks = overlap & nearer & not_self[:, None, :] & not_self[None, :, :]  # k differs from i and from j
     return blocks.any(axis=-1)
 
 

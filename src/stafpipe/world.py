@@ -16,7 +16,7 @@ import pymunk.batch as pb
 from pymunk._chipmunk import lib as _cp
 
 from stafpipe.drives import DRIVES
-from stafpipe.formations import formation_slots, place
+from stafpipe.formations import place
 from stafpipe.geometry import capsule_arrays
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import Observation, SensingConfig, observe
@@ -173,7 +173,7 @@ class Worlds:
         """
         for w, (seed, sc) in enumerate(zip(seeds, self.scenarios, strict=True)):
             team = sc.spec.team
-            slots = formations[w] if formations is not None else formation_slots(team.formation, self.n, team.spacing, team.angle_deg)
+            slots = formations[w] if formations is not None else sc.template()
             h = math.radians(team.heading_deg)
             rng = np.random.default_rng(seed)
             self.rngs[w] = rng
