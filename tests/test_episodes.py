@@ -2,6 +2,7 @@ import pandas as pd
 from typer.testing import CliRunner
 
 from stafpipe.cli import app
+from stafpipe.episode import scenario_from_yaml
 from stafpipe.episode_log import read_episode
 from stafpipe.inspect_log import recompute_metrics
 from stafpipe.launch import launch
@@ -56,3 +57,11 @@ def test_inspect_and_recover(workdir) -> None:
     k = len(recovered.time)
     assert 0 < k < len(full.time)
     assert (recovered.positions == full.positions[:k]).all()
+
+
+def test_robot_group_replaces_the_scenario_robot(workdir) -> None:
+    _eval("eval.episodes=1", "robot=diff_drive", "robot.max_speed=0.5")
+    [path] = list(workdir.glob("outputs/eval/*/*/episodes/*.mcap"))
+    robot = scenario_from_yaml(read_episode(path).scenario_yaml).spec.robot
+    assert (robot.drive, robot.max_speed, robot.radius) == ("diff_drive", 0.5, 0.2)  # radius kept from corridor.yaml
+    assert launch("eval", ["robot.drive=tank", *FAST]) == 2

@@ -56,9 +56,23 @@ def ablate(ctx: typer.Context) -> None:
 
 
 @app.command(context_settings=_HYDRA_ARGS)
-def plot(ctx: typer.Context) -> None:
-    """Draw figures and tables from run directories."""
-    _stage("plot", ctx.args)
+def plot(
+    ctx: typer.Context,
+    kind: str = typer.Argument(None, help="What to draw: trajectories."),
+    run_dir: str = typer.Argument(None, help="The run directory to draw from (e.g. an eval run)."),
+) -> None:
+    """Draw figures from a run directory, e.g. `stafpipe plot trajectories outputs/eval/DATE/TIME`."""
+    # The two positionals are sugar for plot.kind= and plot.run_dir=; anything that looks like an override is one.
+    given = [a for a in (kind, run_dir) if a is not None]
+    positional = [a for a in given if "=" not in a and not a.startswith("-")]
+    overrides = [a for a in given if a not in positional]
+    keys = ["plot.kind", "plot.run_dir"]
+    _stage("plot", [f"{k}={_quote(v)}" for k, v in zip(keys, positional)] + overrides + ctx.args)
+
+
+def _quote(value: str) -> str:
+    # A path with characters Hydra's override grammar treats specially (spaces, commas, brackets) is quoted.
+    return value if all(c.isalnum() or c in "/._-~" for c in value) else "'" + value.replace("'", "\\'") + "'"
 
 
 @app.command()

@@ -34,6 +34,7 @@ log = logging.getLogger(__name__)
 STAGE_FUNCTIONS: dict[str, str] = {
     "generate": "stafpipe.stages.generate:run_generate",
     "eval": "stafpipe.stages.eval:run_eval",
+    "plot": "stafpipe.stages.plot:run_plot",
 }
 MARKER = "stage.json"
 

@@ -14,7 +14,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from stafpipe.geometry import closest_points
 
 
 @dataclass
@@ -90,15 +89,21 @@ def observe(
     rngs: list[np.random.Generator],
 ) -> Observation:
     """Observations of B worlds: pos, vel, goal (B, n, 2); obstacles as capsules seg_a, seg_b (B, C, 2), seg_r (B, C)."""
-    cp = closest_points(pos, seg_a, seg_b)  # (B, n, C, 2)
-    to_cp = cp - pos[..., :, None, :]
-    spine = np.sqrt(np.einsum("...i,...i->...", to_cp, to_cp))  # distance to each capsule's segment
-    k = (spine - seg_r[..., None, :]).argmin(axis=-1)[..., None]
-    nearest = np.take_along_axis(to_cp, k[..., None], axis=-2)[..., 0, :]
+    # Closest point of every capsule spine, per coordinate: (B, n, C) arrays, no (.., 2) axis (this runs every step).
+    px, py = pos[..., 0, None], pos[..., 1, None]
+    ax, ay = seg_a[..., None, :, 0], seg_a[..., None, :, 1]
+    abx, aby = seg_b[..., None, :, 0] - ax, seg_b[..., None, :, 1] - ay
+    t = np.clip(((px - ax) * abx + (py - ay) * aby) / np.maximum(abx * abx + aby * aby, 1e-12), 0.0, 1.0)
+    dx, dy = ax + t * abx - px, ay + t * aby - py
+    spine = np.sqrt(dx * dx + dy * dy)
+    surfaces = spine - seg_r[..., None, :]
+    k = surfaces.argmin(axis=-1)[..., None]
     dist_c = np.take_along_axis(spine, k, axis=-1)[..., 0]
-    surface = dist_c - np.take_along_axis(np.broadcast_to(seg_r[..., None, :], spine.shape), k, axis=-1)[..., 0]
+    surface = np.take_along_axis(surfaces, k, axis=-1)[..., 0]
     # The obstacle vector points at the capsule's surface, not its spine.
-    obstacle = nearest * (np.maximum(surface, 0.0) / np.maximum(dist_c, 1e-12))[..., None]
+    scale = np.maximum(surface, 0.0) / np.maximum(dist_c, 1e-12)
+    obstacle = np.stack([np.take_along_axis(dx, k, axis=-1)[..., 0], np.take_along_axis(dy, k, axis=-1)[..., 0]], axis=-1)
+    obstacle *= scale[..., None]
     obstacle_distance = surface - robot_radius
 
     rel = pos[..., None, :, :] - pos[..., :, None, :]  # [i, j] = p_j - p_i

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pymunk
 import pymunk.batch as pb
+from pymunk._chipmunk import ffi as _ffi
 from pymunk._chipmunk import lib as _cp
 
 from stafpipe.drives import DRIVES
@@ -22,7 +23,9 @@ from stafpipe.scenario import Scenario
 from stafpipe.sensing import Observation, SensingConfig, observe
 
 ROBOT, STATIC, MOVING = 1, 2, 3
-_STATE_FIELDS = pb.BodyFields.POSITION | pb.BodyFields.VELOCITY
+_STATE_FIELDS = (pb.BodyFields.POSITION | pb.BodyFields.VELOCITY).value
+_SET_BODIES = _ffi.addressof(_cp, "pmSpaceBodySetIteratorFuncBatched")
+_GET_BODIES = _ffi.addressof(_cp, "pmSpaceBodyGetIteratorFuncBatched")
 _FAR = 1e6  # padding capsules of worlds with fewer obstacles lie here
 
 
@@ -48,6 +51,40 @@ class Collision:
     b: int
 
 
+class _BodyIO:
+    """pymunk's batch body get/set, prepared once per space (what pymunk.batch does per call, without the per-call setup).
+
+    `velocity_rows` (bodies, 2) is read by `set_velocities`; `state` (bodies, 4: x, y, vx, vy) is a view of a pymunk-owned
+    array of exactly that size, refilled by `get_state`, so pymunk never grows (reallocates) it.
+    """
+
+    def __init__(self, space: pymunk.Space, bodies: int):
+        self.handle = space._space  # noqa: SLF001
+        self.velocity_rows = np.zeros((bodies, 2))
+        self._set_arr = _ffi.new("pmFloatArray *")
+        self._set_mem = _ffi.from_buffer("cpFloat[]", self.velocity_rows.reshape(-1))
+        self._set_arr.arr, self._set_arr.max = self._set_mem, 2 * bodies
+        self._set = _ffi.new("pmBatchedData *")
+        self._set.fields, self._set.floatArray = pb.BodyFields.VELOCITY.value, self._set_arr
+        # pymunk grows an array that is full or one short of full; two spare slots keep it from ever reallocating.
+        self._get_arr = _ffi.gc(_cp.pmFloatArrayNew(4 * bodies + 2), _cp.pmFloatArrayFree)
+        memory = self._get_arr.arr
+        self._get = _ffi.new("pmBatchedData *")
+        self._get.fields, self._get.floatArray = _STATE_FIELDS, self._get_arr
+        self.state = np.frombuffer(_ffi.buffer(memory, 4 * bodies * _ffi.sizeof("cpFloat"))).reshape(bodies, 4)
+        self.get_state()
+        if self._get_arr.arr != memory or self._get_arr.num != 4 * bodies:
+            raise RuntimeError("pymunk reallocated the body-state array; `state` would read freed memory")
+
+    def set_velocities(self) -> None:
+        self._set_arr.num = 0  # the set iterator reads from index `num` on
+        _cp.cpSpaceEachBody(self.handle, _SET_BODIES, self._set)
+
+    def get_state(self) -> None:
+        self._get_arr.num = 0
+        _cp.cpSpaceEachBody(self.handle, _GET_BODIES, self._get)
+
+
 @dataclass
 class _Space:
     """One pymunk space with the bodies of one world."""
@@ -56,20 +93,18 @@ class _Space:
     robots: list[pymunk.Body]
     movers: list[pymunk.Body]
     robot_of: dict[pymunk.Shape, int]
-    velocity_rows: np.ndarray
-    """(bodies, 2): the velocities handed to pymunk, one row per body the batch API iterates."""
-    set_buf: pb.Buffer
-    """Wraps `velocity_rows`' memory (never grown by pymunk: set only reads it)."""
+    io: _BodyIO
     events: list[Collision] = field(default_factory=list)
 
     def step(self, dt: float, substeps: int) -> None:
-        """Hand the velocities to pymunk and advance `substeps` substeps of `dt / substeps`."""
-        pb.set_space_bodies(self.space, pb.BodyFields.VELOCITY, self.set_buf)
+        """Hand the velocities to pymunk, advance `substeps` substeps of `dt / substeps`, read the state back."""
+        self.io.set_velocities()
         # Space.step only adds deferred add/remove and post-step callbacks (unused here) around cpSpaceStep;
         # calling it directly halves the per-substep cost. Space.step ran once at build time to check the bodies.
-        handle = self.space._space  # noqa: SLF001
+        handle, h = self.io.handle, dt / substeps
         for _ in range(substeps):
-            _cp.cpSpaceStep(handle, dt / substeps)
+            _cp.cpSpaceStep(handle, h)
+        self.io.get_state()
 
 
 def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
@@ -108,11 +143,8 @@ def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
     ids = np.frombuffer(probe.int_buf(), dtype=np.uintp)
     if list(ids[: n + len(movers)]) != [b.id for b in robots + movers]:
         raise RuntimeError("pymunk iterates bodies in an unexpected order")
-    rows = np.zeros((len(ids), 2))
-    set_buf = pb.Buffer()
-    set_buf.set_float_buf(rows.reshape(-1))
     space.step(1e-9)  # lets pymunk validate the bodies once; nothing moves
-    out = _Space(space, robots, movers, robot_of, rows, set_buf)
+    out = _Space(space, robots, movers, robot_of, _BodyIO(space, len(ids)))
 
     def robot_robot(arbiter: pymunk.Arbiter, _space: pymunk.Space, _data: object) -> None:
         a, b = (robot_of[s] for s in arbiter.shapes)
@@ -159,7 +191,7 @@ class Worlds:
         self.collided = np.zeros((b, self.n), dtype=bool)
         self.rngs = [np.random.default_rng(0) for _ in scenarios]
         self._mover_state: list[list[tuple[np.ndarray, int]]] = [[] for _ in scenarios]
-        self._get_buf = pb.Buffer()  # pymunk-owned, grown by get_space_bodies; never wraps our memory
+        self._has_movers = [w for w, (_, specs) in enumerate(self._mover_slots) if specs]
 
     @property
     def size(self) -> int:
@@ -223,24 +255,26 @@ class Worlds:
         dt = self.cfg.control_dt
         self.vel, self.heading = self.drive(np.asarray(actions, float), self.vel, self.heading, self.robot, dt)
         events: list[list[Collision]] = []
+        n, substeps = self.n, self.cfg.substeps
         for w, sp in enumerate(self.spaces):
-            sp.velocity_rows[: self.n] = self.vel[w]
+            sp.io.velocity_rows[:n] = self.vel[w]
+        for w in self._has_movers:
+            sp = self.spaces[w]
             for k, body in enumerate(sp.movers):
-                sp.velocity_rows[self.n + k] = self._mover_velocity(w, k, body)
-            sp.step(dt, self.cfg.substeps)
-            self._get_buf.clear()
-            pb.get_space_bodies(sp.space, _STATE_FIELDS, self._get_buf)
-            state = np.frombuffer(self._get_buf.float_buf()).reshape(-1, 4)
-            self.pos[w] = state[: self.n, :2]
-            self.vel[w] = state[: self.n, 2:]
+                sp.io.velocity_rows[n + k] = self._mover_velocity(w, k, body)
+        for w, sp in enumerate(self.spaces):
+            sp.step(dt, substeps)
             events.append(sp.events)
-            for e in sp.events:
-                self.collided[w, e.a] = True
-                if e.b >= 0:
-                    self.collided[w, e.b] = True
-            sp.events = []
+            if sp.events:
+                for e in sp.events:
+                    self.collided[w, e.a] = True
+                    if e.b >= 0:
+                        self.collided[w, e.b] = True
+                sp.events = []
+        state = np.stack([sp.io.state[:n] for sp in self.spaces])
+        self.pos, self.vel = state[..., :2].copy(), state[..., 2:].copy()
         self.time += dt
-        if any(self._mover_slots[w][1] for w in range(self.size)):
+        if self._has_movers:
             self._update_movers()
         return self.observe(), events
 

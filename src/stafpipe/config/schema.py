@@ -44,6 +44,22 @@ class FormationConfig:
 
 
 @dataclass
+class RobotConfig:
+    """Overrides of the scenario's robot (group `robot`); a null field keeps the scenario file's value."""
+
+    radius: float | None = None
+    max_speed: float | None = None
+    max_accel: float | None = None
+    drive: str | None = None
+    """holonomic (STAF's Gazebo robots) or diff_drive (Warthog, Limo; STAF Section 4)."""
+    max_turn_rate: float | None = None
+
+    def overrides(self) -> dict[str, Any]:
+        """The fields that replace the scenario's."""
+        return {k: v for k, v in self.__dict__.items() if v is not None}
+
+
+@dataclass
 class DataConfig:
     """The synthetic formation dataset of `stafpipe generate` (STAF Appendix C: 10,000 instances)."""
 
@@ -104,6 +120,32 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
+PLOT_KINDS = ("trajectories",)
+FORMATS = ("png", "pdf", "svg")
+
+
+@dataclass
+class PlotConfig:
+    """Plot settings (section `plot`)."""
+
+    kind: str = "trajectories"
+    """What to draw: `trajectories` (STAF Fig. 4 style, one figure per episode log)."""
+    run_dir: str = ""
+    """The run directory to draw from (an eval run: its episodes/*.mcap)."""
+    max_episodes: int = 4
+    """Draw at most this many episodes, in episode order (0: all)."""
+    formats: list[str] = field(default_factory=lambda: ["png", "pdf"])
+    dpi: int = 150
+
+    def check(self, key: str = "plot") -> None:
+        require(self.kind in PLOT_KINDS, f"{key}.kind", f"must be one of {list(PLOT_KINDS)}", self.kind)
+        require(bool(self.run_dir), f"{key}.run_dir", "is required: the run directory to draw from", self.run_dir)
+        require(self.max_episodes >= 0, f"{key}.max_episodes", "must be >= 0", self.max_episodes)
+        for fmt in self.formats:
+            require(fmt in FORMATS, f"{key}.formats", f"entries must be in {list(FORMATS)}", fmt)
+        require(self.dpi > 0, f"{key}.dpi", "must be > 0", self.dpi)
+
+
 @dataclass
 class StafConfig:
     """The root config every stage composes; a stage reads the sections it needs."""
@@ -113,6 +155,7 @@ class StafConfig:
     seed: int = 0
     """Seed of every random draw of the run."""
     formation: FormationConfig = field(default_factory=FormationConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
     data: DataConfig = field(default_factory=DataConfig)
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     method: Any = MISSING
@@ -120,3 +163,4 @@ class StafConfig:
     world: WorldConfig = field(default_factory=WorldConfig)
     sensing: SensingConfig = field(default_factory=SensingConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
+    plot: PlotConfig = field(default_factory=PlotConfig)

@@ -17,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf
 from scipy import stats
 from tqdm import tqdm
 
-from stafpipe.config.schema import EvalConfig, FormationConfig
+from stafpipe.config.schema import EvalConfig, FormationConfig, RobotConfig
 from stafpipe.controllers import make_controller
 from stafpipe.episode import run_episode
 from stafpipe.geometry import Geometry
@@ -36,15 +36,22 @@ def episode_seed(seed: int, k: int) -> int:
 
 
 def scenario_for(cfg: DictConfig) -> Scenario:
-    """The run's scenario, with the `formation` group's non-null fields replacing the scenario's own."""
+    """The run's scenario, with the `formation` and `robot` groups' non-null fields replacing the scenario's own.
+
+    The result is built (and so validated) again, so an override such as `robot.drive=tank` fails like a bad file would.
+    """
     scenario = resolve_scenario(cfg.scenario)
     formation: FormationConfig = OmegaConf.to_object(cfg.formation)  # type: ignore[assignment]
     formation.check(allow_unset=True)
-    if formation.type is None:
-        return scenario
-    team = dataclasses.replace(scenario.spec.team, formation=formation.type, angle_deg=formation.angle_deg,
-                               spacing=formation.spacing if formation.spacing is not None else scenario.spec.team.spacing)
-    return build_scenario(dataclasses.replace(scenario.spec, team=team))
+    robot: RobotConfig = OmegaConf.to_object(cfg.robot)  # type: ignore[assignment]
+    spec = scenario.spec
+    if formation.type is not None:
+        spacing = formation.spacing if formation.spacing is not None else spec.team.spacing
+        spec = dataclasses.replace(spec, team=dataclasses.replace(
+            spec.team, formation=formation.type, angle_deg=formation.angle_deg, spacing=spacing))
+    if robot.overrides():
+        spec = dataclasses.replace(spec, robot=dataclasses.replace(spec.robot, **robot.overrides()))
+    return scenario if spec is scenario.spec else build_scenario(spec)
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:

@@ -1,0 +1,77 @@
+"""STAF-Fig.-4-style trajectory plots: the static map in grey, each robot's path a line coloured by its subteam at each
+moment, start (circle) and goal (cross) of every robot, moving obstacles dashed. Read from the episode MCAP logs alone."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle, Polygon
+
+from stafpipe.episode import scenario_from_yaml
+from stafpipe.episode_log import EpisodeRecord, read_episode
+from stafpipe.scenario import Scenario
+
+OBSTACLE_GREY = "0.6"
+SUBTEAM_COLOURS = [f"C{k}" for k in range(10)]
+
+
+def draw_map(ax, scenario: Scenario) -> None:  # noqa: ANN001 (a matplotlib Axes)
+    """Static obstacles in grey: solid polygons, discs and thick segments; world walls as a thin frame."""
+    for poly in scenario.polygons:
+        ax.add_patch(Polygon(poly, closed=True, color=OBSTACLE_GREY, lw=0))
+    for cap in scenario.capsules:
+        a, b = np.asarray(cap.a), np.asarray(cap.b)
+        if cap.radius <= 0:
+            continue  # polygon edges and walls: drawn as the polygons and the frame
+        if np.allclose(a, b):
+            ax.add_patch(Circle(tuple(a), cap.radius, color=OBSTACLE_GREY, lw=0))
+        else:  # a capsule: its rectangle and two end discs
+            d = (b - a) / np.linalg.norm(b - a)
+            n = np.array([-d[1], d[0]]) * cap.radius
+            ax.add_patch(Polygon([a + n, b + n, b - n, a - n], closed=True, color=OBSTACLE_GREY, lw=0))
+            for end in (a, b):
+                ax.add_patch(Circle(tuple(end), cap.radius, color=OBSTACLE_GREY, lw=0))
+    w = scenario.spec.world
+    ax.plot([w.xmin, w.xmax, w.xmax, w.xmin, w.xmin], [w.ymin, w.ymin, w.ymax, w.ymax, w.ymin], color="0.3", lw=1.5)
+    ax.set_xlim(w.xmin, w.xmax)
+    ax.set_ylim(w.ymin, w.ymax)
+    ax.set_aspect("equal")
+
+
+def trajectory_figure(rec: EpisodeRecord, title: str = "") -> Figure:
+    """One episode: map, robot paths coloured by subteam over time, starts, goals, moving obstacles."""
+    scenario = scenario_from_yaml(rec.scenario_yaml)
+    w = scenario.spec.world
+    width = 8.0
+    fig = Figure(figsize=(width, max(2.5, width * (w.ymax - w.ymin) / (w.xmax - w.xmin)) + 0.6))
+    ax = fig.add_subplot()
+    draw_map(ax, scenario)
+    pos, sub = rec.positions, rec.subteams  # (T, n, 2), (T, n)
+    for i in range(pos.shape[1]):
+        segments = np.stack([pos[:-1, i], pos[1:, i]], axis=1)  # (T-1, 2, 2)
+        colours = [SUBTEAM_COLOURS[int(s) % len(SUBTEAM_COLOURS)] for s in sub[:-1, i]]
+        ax.add_collection(LineCollection(segments, colors=colours, linewidths=1.2))
+    ax.scatter(pos[0, :, 0], pos[0, :, 1], s=14, facecolors="none", edgecolors="k", linewidths=0.8, label="start")
+    ax.scatter(rec.goal[:, 0], rec.goal[:, 1], s=14, marker="x", color="k", linewidths=0.8, label="goal")
+    if rec.movers.size:
+        for m in range(rec.movers.shape[1]):
+            ax.plot(rec.movers[:, m, 0], rec.movers[:, m, 1], ls="--", color="0.2", lw=1.0)
+    for sid in np.unique(sub):
+        ax.plot([], [], color=SUBTEAM_COLOURS[int(sid) % len(SUBTEAM_COLOURS)], label=f"subteam {int(sid)}")
+    ax.legend(loc="upper left", fontsize=7, ncols=2, framealpha=0.8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    metrics = rec.metrics or {}
+    summary = ", ".join(f"{k} {metrics[k]:.2f}" for k in ("sr", "tt", "cfi_0.1") if k in metrics)
+    ax.set_title(title or f"{rec.method} on {scenario.spec.name}, seed {rec.seed}" + (f" ({summary})" if summary else ""),
+                 fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def episode_files(run_dir: Path) -> list[Path]:
+    """The episode logs of an eval run directory, in episode order."""
+    return sorted((run_dir / "episodes").glob("*.mcap")) if (run_dir / "episodes").is_dir() else []
