@@ -14,7 +14,7 @@ def test_help_lists_every_stage() -> None:
 
 
 def test_unimplemented_stage_exits_2_with_one_line() -> None:
-    result = runner.invoke(app, ["ablate", "seed=1"])  # filled by the graph-cut issue
+    result = runner.invoke(app, ["train-ppo", "seed=1"])  # filled by the PPO issue
     assert result.exit_code == 2
     assert "not implemented yet" in result.output
 

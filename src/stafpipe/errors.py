@@ -7,3 +7,9 @@ class StafpipeError(Exception):
 
 class ConfigError(StafpipeError):
     """A configuration value is out of its valid range; the message names the key."""
+
+
+def require(ok: bool, key: str, message: str, value: object) -> None:
+    """Raise a ConfigError naming `key` unless `ok`."""
+    if not ok:
+        raise ConfigError(f"{key} {message}, got {value!r}")

@@ -43,3 +43,13 @@ def write_table(df: pd.DataFrame, stem: Path, metadata: dict[str, str] | None = 
     parquet = atomic_write(stem.with_suffix(".parquet"), lambda tmp: pq.write_table(table, tmp))
     csv = atomic_write(stem.with_suffix(".csv"), lambda tmp: df.to_csv(tmp, index=False))
     return [parquet, csv]
+
+
+def markdown_table(df, digits: int = 3) -> str:  # noqa: ANN001 (a pandas DataFrame)
+    """A DataFrame as a GitHub Markdown table, floats rounded to `digits`."""
+    def cell(v: object) -> str:
+        return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+
+    lines = ["| " + " | ".join(map(str, df.columns)) + " |", "|" + "---|" * len(df.columns)]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in df.itertuples(index=False)]
+    return "\n".join(lines) + "\n"

@@ -35,6 +35,8 @@ STAGE_FUNCTIONS: dict[str, str] = {
     "generate": "stafpipe.stages.generate:run_generate",
     "eval": "stafpipe.stages.eval:run_eval",
     "plot": "stafpipe.stages.plot:run_plot",
+    "train-high": "stafpipe.stages.train_high:run_train_high",
+    "ablate": "stafpipe.stages.ablate:run_ablate",
 }
 MARKER = "stage.json"
 

@@ -22,3 +22,8 @@ def conf_dir() -> Path:
 def pipelines_dir() -> Path:
     """The directory of the shipped pipeline files (pipelines/)."""
     return _shipped_dir("pipelines")
+
+
+def package_dir() -> Path:
+    """The installed package's own directory (src/stafpipe in a checkout)."""
+    return _PACKAGE_DIR

@@ -11,17 +11,12 @@ from typing import Any
 
 from omegaconf import MISSING
 
-from stafpipe.errors import ConfigError
+from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
+from stafpipe.highlevel.config import AblateConfig, HighLevelConfig, TrainHighConfig
 from stafpipe.scenario import ScenarioConfig
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
-
-
-def require(ok: bool, key: str, message: str, value: Any) -> None:
-    """Raise a ConfigError naming `key` unless `ok`."""
-    if not ok:
-        raise ConfigError(f"{key} {message}, got {value!r}")
 
 
 @dataclass
@@ -120,7 +115,7 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories",)
+PLOT_KINDS = ("trajectories", "partitions")
 FORMATS = ("png", "pdf", "svg")
 
 
@@ -129,9 +124,10 @@ class PlotConfig:
     """Plot settings (section `plot`)."""
 
     kind: str = "trajectories"
-    """What to draw: `trajectories` (STAF Fig. 4 style, one figure per episode log)."""
+    """What to draw: `trajectories` (an eval run: STAF Fig. 4 style, one figure per episode log) or `partitions` (an
+    ablate run: its example partitions, and the ARI curve of the noise study)."""
     run_dir: str = ""
-    """The run directory to draw from (an eval run: its episodes/*.mcap)."""
+    """The run directory to draw from."""
     max_episodes: int = 4
     """Draw at most this many episodes, in episode order (0: all)."""
     formats: list[str] = field(default_factory=lambda: ["png", "pdf"])
@@ -164,3 +160,6 @@ class StafConfig:
     sensing: SensingConfig = field(default_factory=SensingConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     plot: PlotConfig = field(default_factory=PlotConfig)
+    high: HighLevelConfig = field(default_factory=HighLevelConfig)
+    train_high: TrainHighConfig = field(default_factory=TrainHighConfig)
+    ablate: AblateConfig = field(default_factory=AblateConfig)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+import pandas as pd
+from matplotlib.figure import Figure
 from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config.schema import PlotConfig
@@ -15,28 +17,52 @@ from stafpipe.io import atomic_write
 log = logging.getLogger(__name__)
 
 
-def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
-    """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
+def _trajectory_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     from stafpipe.episode_log import read_episode
     from stafpipe.plots.trajectories import episode_files, trajectory_figure
 
-    pc: PlotConfig = OmegaConf.to_object(cfg.plot)  # type: ignore[assignment]
-    pc.check()
-    run_dir = Path(pc.run_dir)
-    if not run_dir.is_dir():
-        raise StafpipeError(f"plot.run_dir: no such directory: {run_dir}")
     files = episode_files(run_dir)
     if not files:
         raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
     if pc.max_episodes:
         files = files[: pc.max_episodes]
     records = [read_episode(f) for f in files]  # all read (and validated) before anything is written
+    return {f"trajectories_{path.stem}": trajectory_figure(rec) for path, rec in zip(files, records, strict=True)}
+
+
+def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
+    """The partitions of an ablate run (and its ARI curve for the noise study), from its tables."""
+    from stafpipe.plots.partitions import ari_figure, partition_figure
+
+    parts_path, summary_path = run_dir / "partitions.parquet", run_dir / "summary.parquet"
+    if not parts_path.is_file():
+        raise StafpipeError(f"plot.run_dir: {run_dir} holds no partitions.parquet (is it an ablate run?)")
+    try:
+        parts = pd.read_parquet(parts_path)
+        summary = pd.read_parquet(summary_path) if summary_path.is_file() else None
+    except Exception as exc:  # pyarrow raises several kinds for a damaged file
+        raise StafpipeError(f"plot.run_dir: unreadable table in {run_dir} ({type(exc).__name__}: {exc})") from None
+    missing = {"panel", "robot", "x", "y", "goal_x", "goal_y", "subteam"} - set(parts.columns)
+    if missing:
+        raise StafpipeError(f"plot.run_dir: {parts_path} lacks columns {sorted(missing)}")
+    figures = {"partitions": partition_figure(parts)}
+    if summary is not None and {"sigma", "ari", "ari_ci95"} <= set(summary.columns):
+        figures["ari_vs_noise"] = ari_figure(summary)
+    return figures
+
+
+def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
+    """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
+    pc: PlotConfig = OmegaConf.to_object(cfg.plot)  # type: ignore[assignment]
+    pc.check()
+    run_dir = Path(pc.run_dir)
+    if not run_dir.is_dir():
+        raise StafpipeError(f"plot.run_dir: no such directory: {run_dir}")
+    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures}[pc.kind]
     outputs: list[Path] = []
-    for path, rec in zip(files, records, strict=True):
-        fig = trajectory_figure(rec)
+    for name, fig in draw(pc, run_dir).items():
         for fmt in pc.formats:
-            target = out_dir / f"trajectories_{path.stem}.{fmt}"
-            outputs.append(atomic_write(target, lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=pc.dpi)))
-        log.info("drew %s", path.name)
+            outputs.append(atomic_write(out_dir / f"{name}.{fmt}", lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=pc.dpi)))
+        log.info("drew %s", name)
     print("\n".join(str(p) for p in outputs))
     return outputs

@@ -1,0 +1,51 @@
+"""Using a trained deep graph cut: subteam probabilities, hard subteams, and the number of subteams to ask for."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from stafpipe.highlevel.config import HighLevelConfig
+from stafpipe.highlevel.graphs import Team, collate, team_graph
+from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut
+from stafpipe.highlevel.partition import choose_m, hard_assignment
+
+
+SMALL_TEAM = 64
+"""A single team up to this size is decided by the numpy forward pass (same output, a fraction of the time)."""
+
+
+@torch.no_grad()
+def predict(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
+    """Y (n, m_max) of each team (rows sum to 1 over its first m columns)."""
+    cfg = model.cfg
+    graphs = [team_graph(t, cfg.features, cfg.radius) for t in teams]
+    if len(teams) == 1 and teams[0].n <= SMALL_TEAM:
+        return [NumpyGraphCut(model)(graphs[0].x, graphs[0].edges, min(teams[0].m, cfg.m_max))]
+    y = model(collate(graphs, [min(t.m, cfg.m_max) for t in teams])).numpy()
+    bounds = np.cumsum([0] + [t.n for t in teams])
+    return [y[bounds[k] : bounds[k + 1]] for k in range(len(teams))]
+
+
+def divide(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
+    """Subteam label (0 .. m-1) of every robot of each team: argmax of Y, repaired (non-empty, connected where possible)."""
+    cfg = model.cfg
+    out = []
+    for team, y in zip(teams, predict(model, teams), strict=True):
+        if team.m <= 1:
+            out.append(np.zeros(team.n, dtype=int))
+            continue
+        edges = team_graph(team, ["pos"], cfg.radius).edges
+        out.append(hard_assignment(y, edges, min(team.m, cfg.m_max)))
+    return out
+
+
+def subteams_wanted(cfg: HighLevelConfig, kind: str, n: int, eta: float, robot_radius: float,
+                    angle_deg: float = 90.0) -> int:
+    """`high.m`: a fixed number, or with `auto` the smallest m whose subteams fit the passage width eta."""
+    if cfg.m != "auto":
+        return min(int(cfg.m), max(1, n - 1))
+    m, _ = choose_m(kind, n, eta, robot_radius, cfg.safe_gap, min(cfg.m_max, max(1, n - 1)), angle_deg)
+    return m

@@ -1,0 +1,146 @@
+"""From soft assignments to subteams: hard assignment with repair, the adaptive number of subteams, the classical
+partitions the learned cut is compared with, and the statistics every partition is judged by."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from sklearn.cluster import KMeans, SpectralClustering
+
+from stafpipe.formations import formation_slots
+
+
+def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Component id of every robot in the graph of edges that stay inside a subteam (one scipy call for all subteams)."""
+    n = len(labels)
+    inside = labels[edges[0]] == labels[edges[1]]
+    if n <= 64:  # small teams: transitive closure by repeated squaring beats scipy's setup cost
+        reach = np.eye(n, dtype=bool)
+        reach[edges[0][inside], edges[1][inside]] = True
+        for _ in range(max(1, int(np.ceil(np.log2(n))))):
+            reach = (reach.astype(np.float32) @ reach.astype(np.float32)) > 0
+        return reach.argmax(axis=1)  # the lowest robot index reachable names the component
+    graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
+    """Make every one of the m subteams non-empty, and each connected in the radius graph where the graph allows.
+
+    Empty subteam j: takes the robot most likely to be in j from the largest subteam. Disconnected subteam: each part
+    but the largest moves to the subteam it shares most edges with (if it touches one). Repeats until nothing changes.
+    """
+    labels = labels.copy()
+    n = len(labels)
+    m = min(m, n)
+    for _ in range(4 * n + 4):
+        changed = False
+        for j in range(m):
+            if not (labels == j).any():
+                largest = np.bincount(labels, minlength=m).argmax()
+                donors = np.flatnonzero(labels == largest)
+                labels[donors[probs[donors, j].argmax()]] = j
+                changed = True
+        part = _subteam_parts(labels, edges)
+        part_size = np.bincount(part, minlength=n)
+        for j in range(m):
+            parts = np.unique(part[labels == j])
+            keep = parts[part_size[parts].argmax()]
+            for p in parts[parts != keep]:
+                others = labels[edges[1][part[edges[0]] == p]]
+                others = others[others != j]
+                if len(others):  # one move, then the parts are recomputed: they changed
+                    labels[part == p] = np.bincount(others, minlength=m).argmax()
+                    changed = True
+                    break
+            if changed:
+                break
+        if not changed:
+            break
+    return labels
+
+
+def hard_assignment(probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
+    """argmax of Y over the first m subteams, then `repair`."""
+    return repair(probs[:, :m].argmax(axis=1), probs, edges, m)
+
+
+def formation_width(kind: str, k: int, spacing: float, robot_radius: float, angle_deg: float = 90.0) -> float:
+    """Width (m) of a k-robot formation across its heading, robot bodies included."""
+    if k <= 1:
+        return 2 * robot_radius
+    slots = formation_slots(kind, k, spacing, angle_deg)
+    return float(slots[:, 1].max() - slots[:, 1].min()) + 2 * robot_radius
+
+
+def choose_m(kind: str, n: int, eta: float, robot_radius: float, safe_gap: float, m_max: int,
+             angle_deg: float = 90.0) -> tuple[int, bool]:
+    """Adaptive number of subteams (STAF Section 7, limitation 3): the smallest m such that a subteam of ceil(n/m)
+    robots in the team's formation, at its tightest safe spacing (2 r + safe_gap), fits the passage width eta.
+
+    Returns (m, fits); when even m_max subteams do not fit, (m_max, False).
+    """
+    spacing = 2 * robot_radius + safe_gap
+    for m in range(1, max(1, min(m_max, n)) + 1):
+        if formation_width(kind, math.ceil(n / m), spacing, robot_radius, angle_deg) <= eta:
+            return m, True
+    return max(1, min(m_max, n)), False
+
+
+def partition_stats(labels: np.ndarray, pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: int) -> dict[str, float]:
+    """What a partition is judged by: sizes, cut edges, subteam-goal distance (as in loss.py), connectivity."""
+    n = len(labels)
+    sizes = np.bincount(labels, minlength=m)[:m]
+    cut = float((labels[edges[0]] != labels[edges[1]]).mean()) if edges.shape[1] else 0.0
+    d_team = max(float(np.linalg.norm(pos.mean(0) - goal.mean(0))), 1e-9)
+    gaps = [sizes[j] / n * np.linalg.norm(pos[labels == j].mean(0) - goal[labels == j].mean(0)) for j in range(m) if sizes[j]]
+    part = _subteam_parts(labels, edges)
+    connected = all(len(np.unique(part[labels == j])) <= 1 for j in range(m))
+    return {
+        "size_min": float(sizes.min()),
+        "size_max": float(sizes.max()),
+        "imbalance": float(sizes.max() - sizes.min()),
+        "empty_subteams": float((sizes == 0).sum()),
+        "subteams_used": float((sizes > 0).sum()),
+        "cut_fraction": cut,
+        "goal_distance": float(np.sum(gaps) / d_team),
+        "connected": float(connected),
+    }
+
+
+def spectral_partition(pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: int, radius: float, seed: int) -> np.ndarray:
+    """Spectral clustering (scikit-learn) of the radius graph weighted by start and goal proximity."""
+    n = len(pos)
+    if m <= 1:
+        return np.zeros(n, dtype=int)
+    d2 = ((pos[edges[0]] - pos[edges[1]]) ** 2).sum(1) + ((goal[edges[0]] - goal[edges[1]]) ** 2).sum(1)
+    w = np.exp(-d2 / (2 * radius**2))
+    affinity = coo_matrix((w, (edges[0], edges[1])), shape=(n, n)).toarray() + 1e-6  # tiny floor: a connected graph
+    sc = SpectralClustering(n_clusters=m, affinity="precomputed", random_state=seed, assign_labels="kmeans")
+    return sc.fit_predict(affinity)
+
+
+def balanced_kmeans(pos: np.ndarray, goal: np.ndarray, m: int, seed: int, iters: int = 20) -> np.ndarray:
+    """k-means on (start, goal) with equal sizes (within one): Lloyd steps whose assignment step is a min-cost
+    assignment of robots to ceil(n/m) seats per cluster (scipy's linear_sum_assignment)."""
+    n = len(pos)
+    if m <= 1:
+        return np.zeros(n, dtype=int)
+    x = np.concatenate([pos - pos.mean(0), goal - goal.mean(0)], axis=1)
+    centres = KMeans(n_clusters=m, n_init=4, random_state=seed).fit(x).cluster_centers_
+    seats = np.repeat(np.arange(m), math.ceil(n / m))
+    labels = np.full(n, -1)
+    for _ in range(iters):
+        cost = ((x[:, None, :] - centres[seats][None, :, :]) ** 2).sum(-1)
+        rows, cols = linear_sum_assignment(cost)
+        new = np.empty(n, dtype=int)
+        new[rows] = seats[cols]
+        if (new == labels).all():
+            break
+        labels = new
+        centres = np.stack([x[labels == j].mean(0) for j in range(m)])
+    return labels

@@ -1,0 +1,75 @@
+"""`stafpipe train-high`: train STAF's deep graph cut on the synthetic teams of `stafpipe generate`.
+
+Writes `high_level.pt` (the checkpoint: weights, the `high` config, and how it was made), `losses.parquet/.csv` (loss
+terms per epoch, training and validation) and `loss_curves.png/.pdf`. `last.pt` holds the full training state after each
+epoch: rerunning the same config in the same directory (what `stafpipe run` does) resumes a killed run.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pandas as pd
+from omegaconf import DictConfig, OmegaConf
+
+from stafpipe.config.schema import DataConfig, FormationConfig
+from stafpipe.errors import StafpipeError
+from stafpipe.highlevel.config import HighLevelConfig, TrainHighConfig
+from stafpipe.io import atomic_write, write_table
+
+log = logging.getLogger(__name__)
+REQUIRED_COLUMNS = ("instance", "robot", "x", "y", "goal_x", "goal_y")
+
+
+def load_formations(path: str) -> pd.DataFrame:
+    """A `formations.parquet` (or CSV) of `stafpipe generate`, or the run directory holding one; checked for its columns."""
+    p = Path(path)
+    if p.is_dir():
+        p = p / "formations.parquet"
+    if not p.is_file():
+        raise StafpipeError(f"train_high.data: no such file: {p}")
+    try:
+        df = pd.read_parquet(p) if p.suffix == ".parquet" else pd.read_csv(p)
+    except Exception as exc:  # pyarrow and pandas raise several kinds for a damaged file
+        raise StafpipeError(f"train_high.data: {p} is not a readable table ({type(exc).__name__}: {exc})") from None
+    missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
+    if missing:
+        raise StafpipeError(f"train_high.data: {p} lacks columns {missing} (see docs/data.md)")
+    if df[list(REQUIRED_COLUMNS)].isna().any().any():
+        raise StafpipeError(f"train_high.data: {p} has missing values in {list(REQUIRED_COLUMNS)}")
+    return df
+
+
+def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
+    from stafpipe.highlevel.graphs import team_graph, teams_from_frame
+    from stafpipe.highlevel.training import train
+    from stafpipe.launch import config_hash
+    from stafpipe.plots.training import loss_curve_figure
+    from stafpipe.stages.generate import generate_instances
+
+    high: HighLevelConfig = OmegaConf.to_object(cfg.high)  # type: ignore[assignment]
+    tc: TrainHighConfig = OmegaConf.to_object(cfg.train_high)  # type: ignore[assignment]
+    high.check()
+    tc.check()
+    if max(tc.m_choices) > high.m_max:
+        raise StafpipeError(f"train_high.m_choices {list(tc.m_choices)} exceed high.m_max ({high.m_max})")
+    if tc.data:
+        df = load_formations(tc.data)
+    else:
+        data: DataConfig = OmegaConf.to_object(cfg.data)  # type: ignore[assignment]
+        formation: FormationConfig = OmegaConf.to_object(cfg.formation)  # type: ignore[assignment]
+        df = generate_instances(data, formation, int(cfg.seed))
+    teams = teams_from_frame(df, 2)  # m is drawn per epoch in training
+    graphs = [team_graph(t, high.features, high.radius) for t in teams]
+    log.info("training the deep graph cut on %d teams (%d robots)", len(graphs), len(df))
+    made_by = {"data": tc.data or "generated in memory from `data`", "teams": len(graphs)}
+    _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by)
+    outputs = [out_dir / "high_level.pt", out_dir / "last.pt"]
+    outputs += write_table(pd.DataFrame(history), out_dir / "losses")
+    fig = loss_curve_figure(history)
+    for fmt in ("png", "pdf"):
+        outputs.append(atomic_write(out_dir / f"loss_curves.{fmt}", lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=120)))
+    final = history[-1]
+    log.info("final losses: %s", {k: round(v, 4) for k, v in final.items()})
+    return outputs

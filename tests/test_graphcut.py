@@ -1,0 +1,153 @@
+"""STAF's deep graph cut: loss terms with known answers, invariances, batching, repair, adaptive m, checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from stafpipe.errors import StafpipeError
+from stafpipe.formations import formation_slots, place
+from stafpipe.highlevel.checkpoint import load_checkpoint, save_checkpoint
+from stafpipe.highlevel.config import HighLevelConfig
+from stafpipe.highlevel.graphs import Team, make_batch, radius_edges
+from stafpipe.highlevel.loss import balance_printed, loss_terms
+from stafpipe.highlevel.model import DeepGraphCut
+from stafpipe.highlevel.partition import choose_m, formation_width, partition_stats, repair
+
+CFG = HighLevelConfig()
+
+
+def two_clusters() -> Team:
+    """Robots 0-3 around (0, 0), robots 4-7 around (10, 0); goals 20 m up. Edges only inside a cluster."""
+    square = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    pos = np.concatenate([square, square + [10, 0]])
+    return Team(pos, pos + [0, 20], 2)
+
+
+def one_hot(labels, m) -> torch.Tensor:
+    return torch.nn.functional.one_hot(torch.tensor(labels), m).float()
+
+
+def test_loss_terms_known_answers_on_two_clusters() -> None:
+    team = two_clusters()
+    batch = make_batch([team], CFG.features, 2.0)
+    right = loss_terms(one_hot([0] * 4 + [1] * 4, 2), batch)
+    assert right["adjacency"].item() == 0.0 and right["balance"].item() == 0.0
+    assert right["goal"].item() == pytest.approx(1.0)  # each half 20 m from its goals, the team 20 m: (4 * 20 + 4 * 20) / (8 * 20)
+    mixed = loss_terms(one_hot([0, 1] * 4, 2), batch)
+    assert mixed["adjacency"].item() == pytest.approx(8 / 12)  # 12 directed edges per square, 8 cut by alternation
+    together = loss_terms(one_hot([0] * 8, 2), batch)
+    assert together["adjacency"].item() == 0.0 and together["balance"].item() == pytest.approx(1.0)
+    # goals that differ per cluster: cluster 0 moves 20 m, cluster 1 stays; the team centre moves 10 m.
+    moved = Team(team.pos, np.concatenate([team.pos[:4] + [0, 20], team.pos[4:]]), 2)
+    goal = loss_terms(one_hot([0] * 4 + [1] * 4, 2), make_batch([moved], CFG.features, 2.0))["goal"]
+    assert goal.item() == pytest.approx((4 * 20 + 4 * 0) / (8 * 10))
+    # an (almost) empty subteam no longer lowers the term: the printed sum over subteams would halve it here
+    nearly_empty = loss_terms(torch.tensor([[1.0 - 1e-7, 1e-7]] * 8), make_batch([team], CFG.features, 2.0))["goal"]
+    assert nearly_empty.item() == pytest.approx(1.0)
+
+
+def test_printed_balance_term_is_identically_zero() -> None:
+    batch = make_batch([two_clusters()], CFG.features, 2.0)
+    y = torch.softmax(torch.randn(8, 2, generator=torch.Generator().manual_seed(0)), dim=1)
+    assert abs(balance_printed(y, batch).item()) < 1e-5
+    assert loss_terms(y, batch)["balance"].item() > 0  # the used form is not
+
+
+def _circle_team(n: int, m: int, heading: float = 0.3) -> Team:
+    slots = formation_slots("circle", n, 1.0)
+    return Team(place(slots, (1.0, 2.0), heading), place(slots, (21.0, 2.0), heading), m)
+
+
+def test_embedding_and_cut_are_permutation_equivariant() -> None:
+    torch.manual_seed(0)
+    net = DeepGraphCut(CFG).eval()
+    team = _circle_team(9, 3)
+    perm = np.random.default_rng(1).permutation(9)
+    permuted = Team(team.pos[perm], team.goal[perm], 3)
+    with torch.no_grad():
+        a, b = (net(make_batch([t], CFG.features, CFG.radius)) for t in (team, permuted))
+        ha, hb = (net.embed(make_batch([t], CFG.features, CFG.radius)) for t in (team, permuted))
+    assert torch.allclose(a[perm], b, atol=1e-6) and torch.allclose(ha[perm], hb, atol=1e-5)
+    assert torch.all(a[:, 3:] == 0) and torch.allclose(a.sum(1), torch.ones(9))  # m = 3 of m_max = 4
+
+
+def test_a_team_gets_the_same_cut_alone_and_in_a_batch_of_other_sizes() -> None:
+    torch.manual_seed(0)
+    net = DeepGraphCut(CFG).eval()
+    teams = [_circle_team(5, 2), _circle_team(12, 4, 1.0), _circle_team(8, 3, -0.5)]
+    with torch.no_grad():
+        together = net(make_batch(teams, CFG.features, CFG.radius))
+        alone = torch.cat([net(make_batch([t], CFG.features, CFG.radius)) for t in teams])
+    assert torch.allclose(together, alone, atol=1e-6)
+
+
+def test_repair_fills_empty_subteams_and_reconnects_parts() -> None:
+    team = two_clusters()
+    edges = radius_edges(team.pos, 2.0)
+    probs = np.full((8, 3), 1 / 3)
+    empty = repair(np.zeros(8, dtype=int), probs, edges, 3)
+    assert set(empty) == {0, 1, 2}
+    # subteam 0 = robots {0, 1, 4, 5}: two parts 10 m apart; the part in cluster 1 joins subteam 1, its neighbours.
+    split = repair(np.array([0, 0, 1, 1, 0, 0, 2, 2]), probs, edges, 3)
+    stats = partition_stats(split, team.pos, team.goal, edges, 3)
+    assert stats["connected"] == 1.0 and stats["empty_subteams"] == 0.0
+    assert len(set(split[:4])) == 2 and len(set(split[4:])) <= 2
+
+
+def test_adaptive_m_uses_the_formation_width() -> None:
+    # 10 robots of radius 0.2 at spacing 0.5 (gap 0.1): circumradius R = 0.5 / (2 sin 18 deg) with a slot on the heading
+    # axis, so the widest slots are at +-72 deg: 2 R sin 72 deg + 0.4 = 1.94 m across.
+    radius = 0.5 / (2 * np.sin(np.pi / 10))
+    assert formation_width("circle", 10, 0.5, 0.2) == pytest.approx(2 * radius * np.sin(np.radians(72)) + 0.4)
+    assert choose_m("circle", 10, 2.4, 0.2, 0.1, 4) == (1, True)
+    assert choose_m("circle", 10, 2.4, 0.2, 0.3, 4) == (2, True)  # at 0.7 m spacing: 2.55 m wide, 5-robot halves fit
+    assert choose_m("line", 9, 2.0, 0.2, 0.3, 4) == (3, True)  # line abreast: 3 robots 1.8 m, 4 robots 2.5 m
+    assert choose_m("line", 9, 0.3, 0.2, 0.3, 4) == (4, False)  # nothing fits: the most subteams allowed
+
+
+def test_checkpoint_round_trip_and_clear_errors(tmp_path) -> None:
+    torch.manual_seed(0)
+    net = DeepGraphCut(CFG)
+    path = save_checkpoint(tmp_path / "a.pt", net, {"note": "test"})
+    loaded, made_by = load_checkpoint(path)
+    assert made_by == {"note": "test"}
+    assert all(torch.equal(a, b) for a, b in zip(net.state_dict().values(), loaded.state_dict().values(), strict=True))
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    torch.save({"format": "other"}, tmp_path / "other.pt")
+    bad_shape = torch.load(path, weights_only=True)
+    bad_shape["high"]["hidden"] = 16
+    torch.save(bad_shape, tmp_path / "shape.pt")
+    for name, message in [("missing.pt", "no such checkpoint"), ("junk.pt", "not a readable checkpoint"),
+                          ("other.pt", "not a stafpipe high-level checkpoint"), ("shape.pt", "weights do not fit")]:
+        with pytest.raises(StafpipeError, match=message):
+            load_checkpoint(tmp_path / name)
+
+
+def test_numpy_forward_equals_the_torch_network() -> None:
+    from stafpipe.highlevel.graphs import team_graph
+    from stafpipe.highlevel.model import NumpyGraphCut
+
+    for attention in ("relu", "leaky_relu"):
+        torch.manual_seed(3)
+        net = DeepGraphCut(HighLevelConfig(attention=attention)).eval()
+        fast = NumpyGraphCut(net)
+        for team in (_circle_team(7, 2), _circle_team(12, 4, 2.0), Team(np.array([[0.0, 0], [9, 9]]), np.zeros((2, 2)), 1)):
+            with torch.no_grad():
+                expected = net(make_batch([team], CFG.features, CFG.radius)).numpy()
+            g = team_graph(team, CFG.features, CFG.radius)
+            assert np.allclose(fast(g.x, g.edges, team.m), expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("n", [20, 70])  # the dense closure (n <= 64) and the scipy path
+def test_connectivity_of_subteams_on_a_line(n: int) -> None:
+    pos = np.stack([np.arange(n, dtype=float), np.zeros(n)], axis=1)
+    edges = radius_edges(pos, 1.5)  # each robot sees its two neighbours
+    halves = np.repeat([0, 1], n // 2)
+    assert partition_stats(halves, pos, pos + 5, edges, 2)["connected"] == 1.0
+    sandwich = np.zeros(n, dtype=int)
+    sandwich[5:10] = 1
+    assert partition_stats(sandwich, pos, pos + 5, edges, 2)["connected"] == 0.0
+    fixed = repair(sandwich, np.full((n, 2), 0.5), edges, 2)
+    assert partition_stats(fixed, pos, pos + 5, edges, 2)["connected"] == 1.0 and set(fixed) == {0, 1}
