@@ -58,7 +58,8 @@ def ablate(ctx: typer.Context) -> None:
 @app.command(context_settings=_HYDRA_ARGS)
 def plot(
     ctx: typer.Context,
-    kind: str = typer.Argument(None, help="What to draw: trajectories (an eval run) or partitions (an ablate run)."),
+    kind: str = typer.Argument(
+        None, help="What to draw: trajectories (eval run), partitions (ablate run), training (train-ppo/-high run)."),
     run_dir: str = typer.Argument(None, help="The run directory to draw from (e.g. an eval run)."),
 ) -> None:
     """Draw figures from a run directory, e.g. `stafpipe plot trajectories outputs/eval/DATE/TIME`."""

@@ -37,6 +37,7 @@ STAGE_FUNCTIONS: dict[str, str] = {
     "plot": "stafpipe.stages.plot:run_plot",
     "train-high": "stafpipe.stages.train_high:run_train_high",
     "ablate": "stafpipe.stages.ablate:run_ablate",
+    "train-ppo": "stafpipe.stages.train_ppo:run_train_ppo",
 }
 MARKER = "stage.json"
 

@@ -14,6 +14,7 @@ from omegaconf import MISSING
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
 from stafpipe.highlevel.config import AblateConfig, HighLevelConfig, TrainHighConfig
+from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.scenario import ScenarioConfig
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
@@ -115,7 +116,7 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories", "partitions")
+PLOT_KINDS = ("trajectories", "partitions", "training")
 FORMATS = ("png", "pdf", "svg")
 
 
@@ -125,7 +126,8 @@ class PlotConfig:
 
     kind: str = "trajectories"
     """What to draw: `trajectories` (an eval run: STAF Fig. 4 style, one figure per episode log) or `partitions` (an
-    ablate run: its example partitions, and the ARI curve of the noise study)."""
+    ablate run: its example partitions, and the ARI curve of the noise study) or `training` (a train-ppo or train-high
+    run: its learning curves)."""
     run_dir: str = ""
     """The run directory to draw from."""
     max_episodes: int = 4
@@ -163,3 +165,4 @@ class StafConfig:
     high: HighLevelConfig = field(default_factory=HighLevelConfig)
     train_high: TrainHighConfig = field(default_factory=TrainHighConfig)
     ablate: AblateConfig = field(default_factory=AblateConfig)
+    train_ppo: TrainPPOConfig = field(default_factory=TrainPPOConfig)

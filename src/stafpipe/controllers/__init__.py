@@ -10,6 +10,7 @@ from stafpipe.controllers.base import Controller, Event, TeamInfo
 # name -> ("module:ConfigClass", "module:ControllerClass")
 METHODS: dict[str, tuple[str, str]] = {
     "straight": ("stafpipe.controllers.straight:StraightConfig", "stafpipe.controllers.straight:StraightController"),
+    "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
 }
 
 __all__ = ["METHODS", "Controller", "Event", "TeamInfo", "make_controller", "method_config_class"]

@@ -143,12 +143,12 @@ FINDINGS = [  # STAF Section 5 on Fig. 7, as checks on the raw (unrepaired) part
     ("a_balance_only", "splits evenly", lambda s, full: s["imbalance"] <= 1.0),
     ("b_adjacency_only", "puts everyone in one subteam", lambda s, full: s["subteams_used"] <= 1.1),
     ("c_goal_only", "aligns subteams with goals (goal distance < full's)",
-     lambda s, full: s["goal_distance"] < full["goal_distance"] - 1e-6),
+     lambda s, full: s["goal_distance"] < full["goal_distance"] - 1e-3),
     ("d_without_balance", "is unbalanced (imbalance > full's)", lambda s, full: s["imbalance"] > full["imbalance"]),
     ("e_without_adjacency", "is not compact (cut fraction > full's)",
      lambda s, full: s["cut_fraction"] > full["cut_fraction"]),
     ("f_without_goal", "is misaligned with goals (goal distance > full's)",
-     lambda s, full: s["goal_distance"] > full["goal_distance"] + 1e-6),
+     lambda s, full: s["goal_distance"] > full["goal_distance"] + 1e-3),
 ]
 
 

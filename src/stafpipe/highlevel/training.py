@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import logging
 import math
-import subprocess
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -26,18 +25,10 @@ from stafpipe.highlevel.graphs import TeamGraph, collate
 from stafpipe.highlevel.loss import TERMS, loss_terms, total_loss
 from stafpipe.highlevel.model import DeepGraphCut
 from stafpipe.io import atomic_write
+from stafpipe.training_record import commit
 
 log = logging.getLogger(__name__)
 STATE_FILE = "last.pt"
-
-
-def _commit() -> str:
-    try:
-        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=40"], capture_output=True, text=True, timeout=5,
-                             cwd=Path(__file__).parent)
-        return out.stdout.strip() if out.returncode == 0 else "unknown"
-    except OSError:
-        return "unknown"
 
 
 def _draw_m(rng: np.random.Generator, graphs: list[TeamGraph], choices: list[int]) -> list[int]:
@@ -111,7 +102,7 @@ def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, s
                  "optimizer": opt.state_dict(), "history": history}
         _save_state(state_path, state)
         after_epoch(epoch + 1)
-    made_by = {**made_by, "train_high": asdict(tc), "seed": seed, "stafpipe_version": __version__, "commit": _commit(),
+    made_by = {**made_by, "train_high": asdict(tc), "seed": seed, "stafpipe_version": __version__, "commit": commit(),
                "final": history[-1] if history else {}}
     save_checkpoint(out_dir / "high_level.pt", model, made_by)
     return model, history

@@ -23,3 +23,22 @@ def loss_curve_figure(history: list[dict[str, float]]) -> Figure:
         ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+PPO_PANELS = [("charts/success_rate", "success rate"), ("charts/episode_return", "episode return"),
+              ("charts/collisions_per_episode", "collisions / episode"), ("losses/value", "value loss"),
+              ("losses/approx_kl", "approx. KL"), ("charts/fps", "robot-steps / s")]
+
+
+def ppo_figure(history: list[dict[str, float]]) -> Figure:
+    """PPO learning curves against environment robot-steps."""
+    fig = Figure(figsize=(12, 5.6))
+    x = [row["robot_steps"] / 1e6 for row in history]
+    for k, (key, title) in enumerate(PPO_PANELS):
+        ax = fig.add_subplot(2, 3, k + 1)
+        ax.plot(x, [row.get(key, float("nan")) for row in history])
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("robot-steps (millions)", fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig

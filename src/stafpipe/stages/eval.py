@@ -40,7 +40,11 @@ def scenario_for(cfg: DictConfig) -> Scenario:
 
     The result is built (and so validated) again, so an override such as `robot.drive=tank` fails like a bad file would.
     """
-    scenario = resolve_scenario(cfg.scenario)
+    return with_overrides(resolve_scenario(cfg.scenario), cfg)
+
+
+def with_overrides(scenario: Scenario, cfg: DictConfig) -> Scenario:
+    """`scenario` with the `formation` and `robot` groups' non-null fields in place of its own."""
     formation: FormationConfig = OmegaConf.to_object(cfg.formation)  # type: ignore[assignment]
     formation.check(allow_unset=True)
     robot: RobotConfig = OmegaConf.to_object(cfg.robot)  # type: ignore[assignment]

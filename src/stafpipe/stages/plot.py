@@ -51,6 +51,21 @@ def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     return figures
 
 
+def _training_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
+    """Learning curves of a train-ppo run (learning_curves.parquet) or loss curves of a train-high run (losses.parquet)."""
+    from stafpipe.plots.training import loss_curve_figure, ppo_figure
+
+    for name, draw in (("learning_curves", ppo_figure), ("losses", loss_curve_figure)):
+        path = run_dir / f"{name}.parquet"
+        if path.is_file():
+            try:
+                history = pd.read_parquet(path).to_dict("records")
+            except Exception as exc:  # pyarrow raises several kinds for a damaged file
+                raise StafpipeError(f"plot.run_dir: {path} is not a readable table ({type(exc).__name__})") from None
+            return {name: draw(history)}
+    raise StafpipeError(f"plot.run_dir: {run_dir} holds no learning_curves.parquet or losses.parquet (a training run?)")
+
+
 def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
     pc: PlotConfig = OmegaConf.to_object(cfg.plot)  # type: ignore[assignment]
@@ -58,7 +73,7 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     run_dir = Path(pc.run_dir)
     if not run_dir.is_dir():
         raise StafpipeError(f"plot.run_dir: no such directory: {run_dir}")
-    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures}[pc.kind]
+    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures}[pc.kind]
     outputs: list[Path] = []
     for name, fig in draw(pc, run_dir).items():
         for fmt in pc.formats:

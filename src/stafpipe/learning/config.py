@@ -1,0 +1,85 @@
+"""Config dataclasses of `stafpipe train-ppo` (section `train_ppo`); torch-free."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from stafpipe.errors import require
+
+
+@dataclass
+class RewardConfig:
+    """Per-robot reward of one control step. Defaults: DGNN's public training code (Blumenkamp et al., ICRA 2022), as
+    the papers README records it: -1.5 per robot-robot collision, -0.25 per wall contact, a dense progress term, +10 at
+    the goal."""
+
+    progress: float = 1.0
+    """Per metre the robot got closer to its goal this step."""
+    goal: float = 10.0
+    """Once, when the robot first comes within `eval.goal_tolerance` of its goal."""
+    robot_collision: float = -1.5
+    """Each step the robot touches another robot."""
+    wall_contact: float = -0.25
+    """Each step the robot touches an obstacle."""
+    contact_tolerance: float = 0.02
+    """Surfaces closer than this (m) count as touching."""
+
+
+@dataclass
+class PolicyConfig:
+    """The DGNN policy (Blumenkamp et al. 2022): per-robot encoder, message passing over neighbours within the
+    communication radius, MLP actor; a critic head on the same features plus the team mean (a centralized critic)."""
+
+    hidden: int = 64
+    message_layers: int = 1
+    """Rounds of message passing (neighbours' neighbours are reached with 2)."""
+    goal_clip: float = 5.0
+    """The goal vector is clipped to this length (m) before it enters the network."""
+    init_log_std: float = -0.5
+
+
+@dataclass
+class TrainPPOConfig:
+    """PPO on batched worlds (section `train_ppo`). Each iteration resets its worlds and runs one episode of
+    `episode_steps` steps in each, so an iteration boundary is an exact resume point."""
+
+    method: str = "dgnn"
+    """The policy to train (dgnn; STAF's intermediate + low level come with the STAF issue)."""
+    iterations: int = 300
+    worlds: int = 16
+    """B: worlds stepped together per rollout."""
+    episode_steps: int = 400
+    """Control steps per episode (x world.control_dt s); a truncation, bootstrapped from the value."""
+    scenarios: list[str] = field(default_factory=lambda: ["corridor"])
+    """Curriculum: each world of each iteration draws one of these built-in scenario names (or paths)."""
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip: float = 0.2
+    """PPO's clip delta (STAF Eq. (2) writes clip(., 1 - lambda, 1 + lambda) without a value; 0.2 as in PPO [67])."""
+    epochs: int = 4
+    minibatches: int = 4
+    lr: float = 3e-4
+    ent_coef: float = 0.0
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    checkpoint_every: int = 10
+    """Iterations between checkpoints of the full training state."""
+    resume: bool = False
+    """Continue from the newest state of the same config (this run directory first, then outputs/train-ppo/)."""
+    threads: int = 2
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+
+    def check(self, key: str = "train_ppo") -> None:
+        require(self.method in ("dgnn",), f"{key}.method", "must be dgnn", self.method)
+        for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
+            require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
+        require(len(self.scenarios) > 0, f"{key}.scenarios", "must name at least one scenario", self.scenarios)
+        require(0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1, f"{key}.gamma/gae_lambda", "must be in (0, 1]",
+                (self.gamma, self.gae_lambda))
+        require(0 < self.clip < 1, f"{key}.clip", "must be in (0, 1)", self.clip)
+        require(self.lr > 0, f"{key}.lr", "must be > 0", self.lr)
+        require(self.worlds * self.episode_steps >= self.minibatches, f"{key}.minibatches",
+                "must not exceed worlds x episode_steps", self.minibatches)
+        require(self.policy.hidden >= 1 and self.policy.message_layers >= 0, f"{key}.policy", "hidden >= 1, "
+                "message_layers >= 0", (self.policy.hidden, self.policy.message_layers))

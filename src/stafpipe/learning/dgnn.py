@@ -1,0 +1,60 @@
+"""The DGNN policy (Blumenkamp, Morad, Gielis, Li, Prorok, ICRA 2022): a decentralized GNN over neighbours within the
+communication radius feeding an MLP actor, with parameters shared by all robots. Dense over the n robots of a world
+(n is small); masks cut the graph to the communication radius."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from stafpipe.learning.config import PolicyConfig
+from stafpipe.learning.features import EDGE, OWN
+
+
+def _mlp(sizes: list[int]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for k in range(len(sizes) - 1):
+        layers.append(nn.Linear(sizes[k], sizes[k + 1]))
+        if k + 2 < len(sizes):
+            layers.append(nn.ReLU())  # ReLU, not tanh: 4x faster on this torch build (PERFORMANCE-NOTES)
+    return nn.Sequential(*layers)
+
+
+class DGNNPolicy(nn.Module):
+    """Gaussian policy over planar velocity commands (in the robot's frame, scaled by max speed) and a value per robot."""
+
+    def __init__(self, cfg: PolicyConfig):
+        super().__init__()
+        h = cfg.hidden
+        self.cfg = cfg
+        self.encoder = _mlp([OWN, h, h])
+        # message MLP on [e_j || edge_ij]; its first layer is split into a per-sender and a per-edge part, which is the
+        # same linear map computed without repeating e_j for every receiver (the update's cost is in these pairs)
+        self.msg_sender = nn.ModuleList(nn.Linear(h, h) for _ in range(cfg.message_layers))
+        self.msg_edge = nn.ModuleList(nn.Linear(EDGE, h, bias=False) for _ in range(cfg.message_layers))
+        self.msg_out = nn.ModuleList(nn.Linear(h, h) for _ in range(cfg.message_layers))
+        self.updates = nn.ModuleList(_mlp([2 * h, h]) for _ in range(cfg.message_layers))
+        self.actor = _mlp([h, h, 2])
+        self.critic = _mlp([2 * h, h, 1])  # own features + team mean: a centralized critic (allowed by the issue)
+        self.log_std = nn.Parameter(torch.full((2,), cfg.init_log_std))
+
+    def trunk(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """(.., n, hidden) embeddings after message passing: own (.., n, 7), edge (.., n, n, 5), mask (.., n, n)."""
+        e = torch.relu(self.encoder(own))
+        w = mask.float()
+        count = w.sum(-1, keepdim=True).clamp_min(1.0)
+        for k, update in enumerate(self.updates):
+            pre = self.msg_sender[k](e)[..., None, :, :] + self.msg_edge[k](edge)  # [i, j]: from sender j to i
+            m = torch.relu(self.msg_out[k](torch.relu(pre)))
+            agg = (m * w[..., None]).sum(-2) / count  # mean over neighbours
+            e = torch.relu(update(torch.cat([e, agg], dim=-1))) + e
+        return e
+
+    def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Action mean (.., n, 2) and value (.., n)."""
+        e = self.trunk(own, edge, mask)
+        team = e.mean(dim=-2, keepdim=True).expand_as(e)
+        return self.actor(e), self.critic(torch.cat([e, team], dim=-1))[..., 0]
+
+    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
+        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))

@@ -1,0 +1,100 @@
+"""One PPO rollout: B worlds of the harness, one episode each, every robot's transition a sample (parameter sharing)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+from stafpipe.learning.config import RewardConfig, TrainPPOConfig
+from stafpipe.learning.dgnn import DGNNPolicy
+from stafpipe.learning.features import features
+from stafpipe.sensing import Observation
+from stafpipe.world import Worlds
+
+
+class Rollout(NamedTuple):
+    """Buffers shaped (T, B, n, ...) as in CleanRL, plus the bootstrap value after the last step."""
+
+    own: torch.Tensor
+    edge: torch.Tensor
+    mask: torch.Tensor
+    actions: torch.Tensor
+    logprobs: torch.Tensor
+    values: torch.Tensor
+    rewards: torch.Tensor
+    last_value: torch.Tensor
+    """(B, n): V(s_T), the episode is truncated there."""
+
+
+def commands(actions: np.ndarray, heading: np.ndarray, max_speed: float) -> np.ndarray:
+    """Policy outputs (robot frame, clipped to [-1, 1]) -> world-frame velocity commands (m/s)."""
+    a = np.clip(actions, -1.0, 1.0) * max_speed
+    c, s = np.cos(heading), np.sin(heading)
+    return np.stack([c * a[..., 0] - s * a[..., 1], s * a[..., 0] + c * a[..., 1]], axis=-1)
+
+
+def contact_penalties(worlds: Worlds, obs: Observation, rc: RewardConfig) -> np.ndarray:
+    """(B, n) collision and wall-contact penalties of this step (DGNN's -1.5 and -0.25 per contact)."""
+    gap = np.linalg.norm(worlds.pos[:, :, None] - worlds.pos[:, None], axis=-1) - 2 * worlds.robot.radius
+    idx = np.arange(worlds.n)
+    gap[:, idx, idx] = np.inf
+    robot_hits = (gap < rc.contact_tolerance).sum(-1)
+    wall = obs.obstacle_distance < rc.contact_tolerance
+    return rc.robot_collision * robot_hits + rc.wall_contact * wall
+
+
+def collect(policy: DGNNPolicy, worlds: Worlds, obs: Observation, tc: TrainPPOConfig, tolerance: float,
+            sensing_radius: float) -> tuple[Rollout, dict[str, float]]:
+    """Run `tc.episode_steps` steps in every world with actions sampled from the policy."""
+    rc, clip = tc.reward, tc.policy.goal_clip
+    buf: dict[str, list] = {k: [] for k in ("own", "edge", "mask", "actions", "logprobs", "values", "rewards")}
+    dist = np.linalg.norm(worlds.goal - worlds.pos, axis=-1)
+    reached = dist <= tolerance
+    hits = 0
+    for _ in range(tc.episode_steps):
+        f = features(obs, clip, sensing_radius)
+        own, edge, mask = torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask)
+        with torch.no_grad():
+            mean, value = policy(own, edge, mask)
+            dist_a = policy.distribution(mean)
+            action = dist_a.sample()
+            logprob = dist_a.log_prob(action).sum(-1)
+        obs, events = worlds.step(commands(action.numpy(), worlds.heading, worlds.robot.max_speed))
+        hits += sum(len(e) for e in events)
+        new_dist = np.linalg.norm(worlds.goal - worlds.pos, axis=-1)
+        now_reached = new_dist <= tolerance
+        reward = rc.progress * (dist - new_dist) + rc.goal * (now_reached & ~reached) + contact_penalties(worlds, obs, rc)
+        dist, reached = new_dist, reached | now_reached
+        for key, v in (("own", own), ("edge", edge), ("mask", mask), ("actions", action), ("logprobs", logprob),
+                       ("values", value), ("rewards", torch.from_numpy(reward.astype(np.float32)))):
+            buf[key].append(v)
+    f = features(obs, clip, sensing_radius)
+    with torch.no_grad():
+        _, last_value = policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
+    rollout = Rollout(**{k: torch.stack(v) for k, v in buf.items()}, last_value=last_value)
+    at_goal = dist <= tolerance
+    stats = {
+        "success_rate": float((at_goal & ~worlds.collided).mean()),  # the harness' SR: at goal, never collided
+        "at_goal": float(at_goal.mean()),
+        "reached_once": float(reached.mean()),
+        "collisions_per_episode": hits / worlds.size,
+        "episode_return": float(rollout.rewards.sum(0).mean()),
+    }
+    return rollout, stats
+
+
+def gae(rewards: torch.Tensor, values: torch.Tensor, last_value: torch.Tensor, gamma: float,
+        lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Generalized advantage estimation over (T, ...) buffers of one truncated episode (no terminal inside it):
+    delta_t = r_t + gamma V(s_{t+1}) - V(s_t); A_t = delta_t + gamma lam A_{t+1}. Returns (advantages, returns)."""
+    adv = torch.zeros_like(rewards)
+    next_adv = torch.zeros_like(last_value)
+    next_value = last_value
+    for t in reversed(range(len(rewards))):
+        delta = rewards[t] + gamma * next_value - values[t]
+        next_adv = delta + gamma * lam * next_adv
+        adv[t] = next_adv
+        next_value = values[t]
+    return adv, adv + values

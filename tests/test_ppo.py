@@ -1,0 +1,93 @@
+"""The PPO trainer: GAE known answer, determinism, exact resume, the train-ppo stage and the dgnn method."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+import pytest
+import torch
+from typer.testing import CliRunner
+
+import stafpipe.learning.ppo as ppo
+from conftest import job_dirs
+from stafpipe.cli import app
+from stafpipe.launch import launch
+from stafpipe.learning.checkpoint import load_policy
+from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
+from stafpipe.learning.rollout import gae
+from stafpipe.sensing import SensingConfig
+from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.world import WorldConfig
+
+TINY = ["train_ppo.iterations=2", "train_ppo.worlds=2", "train_ppo.episode_steps=8", "train_ppo.policy.hidden=16",
+        "train_ppo.checkpoint_every=1"]
+
+
+def test_gae_matches_a_hand_computed_case() -> None:
+    r, v = torch.tensor([1.0, 0.0, 2.0]), torch.tensor([0.5, 0.2, 0.1])
+    g, lam, last = 0.9, 0.8, torch.tensor(0.3)
+    d2 = 2.0 + g * 0.3 - 0.1
+    d1 = 0.0 + g * 0.1 - 0.2
+    d0 = 1.0 + g * 0.2 - 0.5
+    a2 = d2
+    a1 = d1 + g * lam * a2
+    a0 = d0 + g * lam * a1
+    adv, ret = gae(r, v, last, g, lam)
+    assert torch.allclose(adv, torch.tensor([a0, a1, a2])) and torch.allclose(ret, adv + v)
+
+
+def _train(out_dir, iterations=3, resume_from=None, on_iteration=lambda h: None):
+    tc = TrainPPOConfig(iterations=iterations, worlds=2, episode_steps=6, policy=PolicyConfig(hidden=16),
+                        checkpoint_every=1, minibatches=2, epochs=2)
+    corridor = load_named_scenario("corridor")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return ppo.train_ppo(tc, lambda rng, k: [corridor] * k, WorldConfig(), SensingConfig(), 0.3, 4, out_dir, "h",
+                         resume_from, on_iteration)
+
+
+def _same(a, b) -> bool:
+    return all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True))
+
+
+def test_training_is_deterministic_and_resumes_exactly(tmp_path) -> None:
+    full, hist = _train(tmp_path / "a")
+    again, _ = _train(tmp_path / "b")
+    assert _same(full, again)
+    assert all(math.isfinite(v) for row in hist for v in row.values() if isinstance(v, float))
+
+    def killed(history) -> None:
+        if len(history) == 2:
+            raise KeyboardInterrupt  # after iteration 2's state was saved
+
+    with pytest.raises(KeyboardInterrupt):
+        _train(tmp_path / "c", on_iteration=killed)
+    resumed, rhist = _train(tmp_path / "c", resume_from=tmp_path / "c" / ppo.STATE_FILE)
+    assert _same(full, resumed)
+    assert [r["iteration"] for r in rhist] == [1, 2, 3]
+    assert [r["charts/episode_return"] for r in rhist] == [r["charts/episode_return"] for r in hist]
+
+
+def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
+    assert launch("train-ppo", TINY) == 0
+    [run] = job_dirs(workdir)
+    curves = pd.read_parquet(run / "learning_curves.parquet")
+    assert list(curves.iteration) == [1, 2] and curves["losses/value"].notna().all()
+    policy, made_by = load_policy(run / "policy.pt", "dgnn")
+    assert made_by["iterations"] == 2 and policy.cfg.hidden == 16
+    # resume=true finds the finished state of the same config and has nothing left to do
+    assert launch("train-ppo", [*TINY, "train_ppo.resume=true"]) == 0
+    second = [d for d in job_dirs(workdir) if d != run][0]
+    assert len(pd.read_parquet(second / "learning_curves.parquet")) == 2
+    assert launch("eval", ["method=dgnn", f"method.checkpoint={run}/policy.pt", "eval.episodes=1",
+                           "scenario.time_limit=3"]) == 0
+    result = CliRunner().invoke(app, ["plot", "training", str(run)])
+    assert result.exit_code == 0 and "learning_curves.png" in result.output
+
+
+def test_bad_policy_checkpoint_and_settings_are_refused(workdir) -> None:
+    (workdir / "junk.pt").write_bytes(b"junk")
+    assert launch("eval", ["method=dgnn", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
+    assert launch("train-ppo", [*TINY, "train_ppo.clip=1.5"]) == 2
+    assert launch("train-ppo", [*TINY, "train_ppo.scenarios=[corridor,zhu_corridor16]"]) == 2  # team sizes differ
+    assert not job_dirs(workdir)
