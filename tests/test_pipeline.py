@@ -8,12 +8,12 @@ from stafpipe.pipeline import run_pipeline
 def test_smoke_runs_then_skips_then_forces(workdir, capsys) -> None:
     assert run_pipeline("smoke") == 0
     first = {d: (d / "stage.json").stat().st_mtime_ns for d in job_dirs(workdir)}
-    assert len(first) == 6 and len(list(workdir.rglob("episodes/*.mcap"))) == 2
+    assert len(first) == 8 and len(list(workdir.rglob("episodes/*.mcap"))) == 4
     assert len(list(workdir.rglob("*-plot-straight-*/trajectories_episode_0000.png"))) == 1
     capsys.readouterr()
     assert run_pipeline("smoke") == 0
     out = capsys.readouterr().out
-    assert out.count("skipped") == 6
+    assert out.count("skipped") == 8
     assert {d: (d / "stage.json").stat().st_mtime_ns for d in job_dirs(workdir)} == first
     assert run_pipeline("smoke", force=True) == 0
     assert all((d / "stage.json").stat().st_mtime_ns != t for d, t in first.items())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 import pytest
 import torch
@@ -37,12 +38,24 @@ def test_gae_matches_a_hand_computed_case() -> None:
     assert torch.allclose(adv, torch.tensor([a0, a1, a2])) and torch.allclose(ret, adv + v)
 
 
+def test_guide_targets_follow_the_path_then_release_to_the_goal() -> None:
+    from stafpipe.learning.features import guide_targets
+
+    path = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    pos = np.array([[2.0, 1.0], [9.0, -1.0], [10.5, 7.0]])
+    goal = np.array([[12.0, 12.0], [8.0, 12.0], [11.0, 10.0]])
+    got = guide_targets(pos, goal, path, lookahead=2.0, release=4.0)
+    # robot 0 projects to arc 2 -> 4 ahead: (4, 0); robot 1 to arc 9 -> 11: (10, 1); robot 2 to arc 17, 3 from the end
+    assert np.allclose(got, [[4.0, 0.0], [10.0, 1.0], [11.0, 10.0]])
+
+
 def _train(out_dir, iterations=3, resume_from=None, on_iteration=lambda h: None):
     tc = TrainPPOConfig(iterations=iterations, worlds=2, episode_steps=6, policy=PolicyConfig(hidden=16),
                         checkpoint_every=1, minibatches=2, epochs=2)
     corridor = load_named_scenario("corridor")
+    path = np.array([[4.0, 6.0], [26.0, 6.0]])
     out_dir.mkdir(parents=True, exist_ok=True)
-    return ppo.train_ppo(tc, lambda rng, k: [corridor] * k, WorldConfig(), SensingConfig(), 0.3, 4, out_dir, "h",
+    return ppo.train_ppo(tc, lambda rng, k: [(corridor, path)] * k, WorldConfig(), SensingConfig(), 0.3, 4, out_dir, "h",
                          resume_from, on_iteration)
 
 

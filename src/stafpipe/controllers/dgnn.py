@@ -11,7 +11,7 @@ import torch
 
 from stafpipe.controllers.base import Controller, TeamInfo
 from stafpipe.learning.checkpoint import load_policy
-from stafpipe.learning.features import features
+from stafpipe.learning.features import features, guide_targets
 from stafpipe.learning.rollout import commands
 from stafpipe.sensing import Observation
 
@@ -38,13 +38,19 @@ class DGNNController(Controller):
         self.policy, self.made_by = load_policy(cfg.checkpoint, "dgnn")
         self.max_speed = 1.0
         self.generator = torch.Generator().manual_seed(0)
+        self.path = np.zeros((0, 2))
 
     def reset(self, team: TeamInfo) -> None:
         super().reset(team)
         self.max_speed = team.scenario.spec.robot.max_speed
+        self.path = team.path
 
     def act(self, obs: Observation) -> np.ndarray:
-        f = features(obs, self.policy.cfg.goal_clip, self.cfg.sensing_radius)
+        pc = self.policy.cfg
+        target = guide_targets(obs.position, obs.goal, self.path, pc.lookahead, pc.release) if pc.guide == "path" else None
+        if target is not None:
+            self._targets = target
+        f = features(obs, pc.goal_clip, self.cfg.sensing_radius, target)
         with torch.no_grad():
             mean, _ = self.policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
             if not self.cfg.deterministic:

@@ -34,7 +34,13 @@ class PolicyConfig:
     message_layers: int = 1
     """Rounds of message passing (neighbours' neighbours are reached with 2)."""
     goal_clip: float = 5.0
-    """The goal vector is clipped to this length (m) before it enters the network."""
+    """The target vector is clipped to this length (m) before it enters the network."""
+    guide: str = "path"
+    """Target: `goal` (straight to the robot's own goal) or `path` (ahead on the team's shortest path; features.py)."""
+    lookahead: float = 2.0
+    """guide=path: how far ahead on the path the target lies (m)."""
+    release: float = 4.0
+    """guide=path: within this distance of the path's end the target becomes the robot's own goal (m)."""
     init_log_std: float = -0.5
 
 
@@ -81,5 +87,6 @@ class TrainPPOConfig:
         require(self.lr > 0, f"{key}.lr", "must be > 0", self.lr)
         require(self.worlds * self.episode_steps >= self.minibatches, f"{key}.minibatches",
                 "must not exceed worlds x episode_steps", self.minibatches)
+        require(self.policy.guide in ("goal", "path"), f"{key}.policy.guide", "must be goal or path", self.policy.guide)
         require(self.policy.hidden >= 1 and self.policy.message_layers >= 0, f"{key}.policy", "hidden >= 1, "
                 "message_layers >= 0", (self.policy.hidden, self.policy.message_layers))

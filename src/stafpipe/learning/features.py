@@ -1,8 +1,11 @@
 """What a learned policy sees, per robot in its own frame (rotated by its heading), from the harness' Observation.
 
-Own features (7): goal vector (clipped), own velocity, vector to the closest obstacle point (STAF's c_i) and its
+Own features (7): target vector (clipped), own velocity, vector to the closest obstacle point (STAF's c_i) and its
 distance. Edge features (5) for each neighbour j within the communication radius: its relative position, relative
-velocity and distance. No global path planner: the goal vector is the straight line to the robot's own goal.
+velocity and distance. The target is the robot's own goal, or (`guide=path`) a point `lookahead` metres ahead on the
+team centre's shortest path on the map (the harness' global planner, TeamInfo.path) until the robot is within
+`release` metres of the path's end, then its own goal: a straight goal vector leaves robots stuck on the wall beside a
+gap (we saw it in the first DGNN runs).
 """
 
 from __future__ import annotations
@@ -30,10 +33,26 @@ def _rotate(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
-def features(obs: Observation, goal_clip: float, sensing_radius: float) -> Features:
-    """Features of every robot of an observation (batched or single world)."""
+def guide_targets(pos: np.ndarray, goal: np.ndarray, path: np.ndarray, lookahead: float, release: float) -> np.ndarray:
+    """(n, 2) targets of one world's robots: the point `lookahead` ahead of each robot's projection on `path` (K, 2),
+    or the robot's own goal once its projection is within `release` of the path's end."""
+    seg = np.diff(path, axis=0)
+    length = np.maximum(np.linalg.norm(seg, axis=1), 1e-9)
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    t = np.clip(np.einsum("nkd,kd->nk", pos[:, None] - path[None, :-1], seg) / length**2, 0.0, 1.0)
+    proj = path[None, :-1] + t[..., None] * seg[None]
+    k = np.linalg.norm(pos[:, None] - proj, axis=-1).argmin(axis=1)
+    arc = cum[k] + t[np.arange(len(pos)), k] * length[k]
+    ahead = np.minimum(arc + lookahead, cum[-1])
+    j = np.clip(np.searchsorted(cum, ahead, side="right") - 1, 0, len(seg) - 1)
+    point = path[j] + ((ahead - cum[j]) / length[j])[:, None] * seg[j]
+    return np.where((cum[-1] - arc < release)[:, None], goal, point)
+
+
+def features(obs: Observation, goal_clip: float, sensing_radius: float, target: np.ndarray | None = None) -> Features:
+    """Features of every robot of an observation (batched or single world); `target` replaces the goal if given."""
     c, s = np.cos(obs.heading), np.sin(obs.heading)
-    to_goal = obs.goal - obs.position
+    to_goal = (obs.goal if target is None else target) - obs.position
     dist = np.linalg.norm(to_goal, axis=-1, keepdims=True)
     to_goal = to_goal * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     near = np.minimum(obs.obstacle_distance, sensing_radius)[..., None]

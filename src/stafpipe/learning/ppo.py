@@ -77,7 +77,7 @@ def save_state(path: Path, state: dict[str, Any]) -> None:
     atomic_write(path, lambda tmp: tmp.write_bytes(buf.getvalue()))
 
 
-def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[Scenario]],
+def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[tuple[Scenario, np.ndarray]]],
               world_cfg: WorldConfig, sensing: SensingConfig, tolerance: float, seed: int, out_dir: Path,
               config_hash: str, resume_from: Path | None, on_iteration: Callable[[list[dict[str, float]]], None]
               ) -> tuple[DGNNPolicy, list[dict[str, float]]]:
@@ -101,9 +101,10 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
     for it in bar:
         began = time.perf_counter()
         rng = np.random.default_rng([seed, it])
-        worlds = Worlds(draw_scenarios(rng, tc.worlds), sensing, world_cfg)
+        drawn = draw_scenarios(rng, tc.worlds)  # (scenario, its team-centre shortest path) per world
+        worlds = Worlds([s for s, _ in drawn], sensing, world_cfg)
         obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, tc.worlds)])
-        ro, stats = collect(policy, worlds, obs, tc, tolerance, sensing.radius)
+        ro, stats = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [p for _, p in drawn])
         collected = time.perf_counter()
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
         losses = update(policy, opt, ro, adv, ret, tc, gen)

@@ -7,9 +7,9 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from stafpipe.learning.config import RewardConfig, TrainPPOConfig
+from stafpipe.learning.config import PolicyConfig, RewardConfig, TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
-from stafpipe.learning.features import features
+from stafpipe.learning.features import features, guide_targets
 from stafpipe.sensing import Observation
 from stafpipe.world import Worlds
 
@@ -45,16 +45,25 @@ def contact_penalties(worlds: Worlds, obs: Observation, rc: RewardConfig) -> np.
     return rc.robot_collision * robot_hits + rc.wall_contact * wall
 
 
+def targets(worlds: Worlds, paths: list[np.ndarray] | None, pc: PolicyConfig) -> np.ndarray | None:
+    """(B, n, 2) guide targets of every world (None: the robots' own goals)."""
+    if pc.guide != "path" or paths is None:
+        return None
+    return np.stack([guide_targets(worlds.pos[w], worlds.goal[w], paths[w], pc.lookahead, pc.release)
+                     for w in range(worlds.size)])
+
+
 def collect(policy: DGNNPolicy, worlds: Worlds, obs: Observation, tc: TrainPPOConfig, tolerance: float,
-            sensing_radius: float) -> tuple[Rollout, dict[str, float]]:
-    """Run `tc.episode_steps` steps in every world with actions sampled from the policy."""
+            sensing_radius: float, paths: list[np.ndarray] | None = None) -> tuple[Rollout, dict[str, float]]:
+    """Run `tc.episode_steps` steps in every world with actions sampled from the policy; `paths` are the worlds'
+    team-centre shortest paths (for `policy.guide=path`)."""
     rc, clip = tc.reward, tc.policy.goal_clip
     buf: dict[str, list] = {k: [] for k in ("own", "edge", "mask", "actions", "logprobs", "values", "rewards")}
     dist = np.linalg.norm(worlds.goal - worlds.pos, axis=-1)
     reached = dist <= tolerance
     hits = 0
     for _ in range(tc.episode_steps):
-        f = features(obs, clip, sensing_radius)
+        f = features(obs, clip, sensing_radius, targets(worlds, paths, tc.policy))
         own, edge, mask = torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask)
         with torch.no_grad():
             mean, value = policy(own, edge, mask)
@@ -70,7 +79,7 @@ def collect(policy: DGNNPolicy, worlds: Worlds, obs: Observation, tc: TrainPPOCo
         for key, v in (("own", own), ("edge", edge), ("mask", mask), ("actions", action), ("logprobs", logprob),
                        ("values", value), ("rewards", torch.from_numpy(reward.astype(np.float32)))):
             buf[key].append(v)
-    f = features(obs, clip, sensing_radius)
+    f = features(obs, clip, sensing_radius, targets(worlds, paths, tc.policy))
     with torch.no_grad():
         _, last_value = policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
     rollout = Rollout(**{k: torch.stack(v) for k, v in buf.items()}, last_value=last_value)

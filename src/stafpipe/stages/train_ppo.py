@@ -30,6 +30,14 @@ def load_named_scenario(name: str) -> Scenario:
     return build_scenario(load_scenario_file(builtin if builtin.is_file() else Path(name)))
 
 
+def team_path(scenario: Scenario, sensing) -> np.ndarray:  # noqa: ANN001 (a SensingConfig)
+    """The team centre's shortest path on the map, as the harness gives it to controllers (TeamInfo.path)."""
+    from stafpipe.episode import episode_context
+    from stafpipe.geometry import Geometry
+
+    return episode_context(scenario, Geometry(scenario), sensing, 0.3, 0.0)[1]
+
+
 def resume_state(out_dir: Path, digest: str) -> Path | None:
     """The newest training state of this config: in this run directory, else anywhere under outputs/train-ppo/."""
     import torch
@@ -65,8 +73,10 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     if any(s.spec.robot != pool[0].spec.robot for s in pool):
         raise StafpipeError("train_ppo.scenarios: all need the same robot (set the `robot` group to make them equal)")
 
-    def draw(rng: np.random.Generator, count: int) -> list[Scenario]:
-        return [pool[int(k)] for k in rng.integers(len(pool), size=count)]
+    paths = [team_path(s, sensing) for s in pool]
+
+    def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray]]:
+        return [(pool[int(k)], paths[int(k)]) for k in rng.integers(len(pool), size=count)]
 
     plain = copy.deepcopy(cfg)
     plain.train_ppo.resume = False  # the same run, resumed or not, has one hash

@@ -1,0 +1,51 @@
+"""Trainer throughput: environment robot-steps per second of PPO rollouts including the policy forward pass, and the
+update time per sample, for the DGNN policy on the 10-robot corridor.
+
+Usage: python benchmarks/ppo_throughput.py [--steps 100]
+Prints one row per number of batched worlds (B = 4, 16, 64).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+
+from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
+from stafpipe.learning.dgnn import DGNNPolicy
+from stafpipe.learning.ppo import update
+from stafpipe.learning.rollout import collect, gae
+from stafpipe.sensing import SensingConfig
+from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.world import Worlds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--steps", type=int, default=100)
+    args = parser.parse_args()
+    torch.set_num_threads(2)
+    torch.manual_seed(0)
+    corridor = load_named_scenario("corridor")
+    print(f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | {'overall robot-steps/s':>21}")
+    print("-" * 76)
+    for b in (4, 16, 64):
+        tc = TrainPPOConfig(worlds=b, episode_steps=args.steps)
+        policy = DGNNPolicy(PolicyConfig())
+        opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
+        worlds = Worlds([corridor] * b, SensingConfig())
+        obs = worlds.reset(list(range(b)))
+        start = time.perf_counter()
+        ro, _ = collect(policy, worlds, obs, tc, 0.3, 2.0)
+        rollout = time.perf_counter() - start
+        adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
+        start = time.perf_counter()
+        update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))
+        upd = time.perf_counter() - start
+        samples = ro.rewards.numel()
+        print(f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {samples / (rollout + upd):>21,.0f}")
+
+
+if __name__ == "__main__":
+    main()
