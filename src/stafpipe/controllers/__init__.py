@@ -10,6 +10,7 @@ from stafpipe.controllers.base import Controller, Event, TeamInfo
 # name -> ("module:ConfigClass", "module:ControllerClass")
 METHODS: dict[str, tuple[str, str]] = {
     "straight": ("stafpipe.controllers.straight:StraightConfig", "stafpipe.controllers.straight:StraightController"),
+    "lf": ("stafpipe.controllers.lf:LFConfig", "stafpipe.controllers.lf:LFController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
 }
 

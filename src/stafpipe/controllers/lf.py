@@ -1,0 +1,117 @@
+"""`method=lf`: the leader-follower baseline STAF compares with (STAF Section 4, "L&F [15]": Reily, Reardon, Zhang,
+RSS 2020): "one of the robots is designated as the leader robot that leads the movements of the other follower robots
+in the team while maintaining the formation". No subteaming and no formation adaptation, by design.
+
+Leader: the robot in the formation's front slot; it follows its own shortest collision-free path on the map (the
+harness' grid planner, clearance = robot radius + `clearance_margin`) at a speed that drops while followers lag.
+Followers: each tracks its slot = leader position + R(path heading) (slot_i - slot_leader), the formation rotated to the
+direction the leader moves, with a proportional gain. Towards robots and obstacles
+closer than `avoid_distance` the approach speed is capped in proportion to the gap (collision avoidance), then the
+drive caps the speed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from stafpipe.controllers.base import Controller, TeamInfo
+from stafpipe.formations import rotation
+from stafpipe.geometry import Geometry
+from stafpipe.sensing import Observation
+
+
+@dataclass
+class LFConfig:
+    """Config of `method=lf` (group `method`)."""
+
+    name: str = "lf"
+    gain: float = 1.5
+    """Proportional gain (1/s) of a follower towards its slot (and of the leader towards its path point)."""
+    lookahead: float = 1.0
+    """The leader steers to the point this far ahead on its path (m)."""
+    lag_slowdown: float = 0.5
+    """Leader speed factor = 1 / (1 + lag_slowdown x mean follower slot error in m): it waits for its team."""
+    avoid_distance: float = 0.35
+    """Surface gap (m) under which the approach speed towards a robot or an obstacle is limited."""
+    avoid_gain: float = 2.0
+    """Allowed approach speed (m/s) per metre of gap left (minus 0.02 m)."""
+    clearance_margin: float = 0.1
+    """Added to the robot radius as the leader path's clearance from obstacles (m)."""
+
+
+def _path_point(path: np.ndarray, p: np.ndarray, ahead: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point `ahead` metres beyond the projection of p on the polyline, and the path's unit direction there."""
+    seg = np.diff(path, axis=0)
+    length = np.maximum(np.linalg.norm(seg, axis=1), 1e-9)
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    t = np.clip(((p - path[:-1]) * seg).sum(1) / length**2, 0.0, 1.0)
+    k = int(np.linalg.norm(path[:-1] + t[:, None] * seg - p, axis=1).argmin())
+    s = min(cum[k] + t[k] * length[k] + ahead, cum[-1])
+    j = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+    return path[j] + (s - cum[j]) / length[j] * seg[j], seg[j] / length[j]
+
+
+class LFController(Controller):
+    """Leader-follower formation control with collision avoidance."""
+
+    def __init__(self, cfg: LFConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+
+    def reset(self, team: TeamInfo) -> None:
+        super().reset(team)
+        spec = team.scenario.spec
+        self.radius, self.max_speed = spec.robot.radius, spec.robot.max_speed
+        # slots in the team's frame, with robot i at slot i (the harness places robot i on slot i of the template)
+        self.slots = team.template - team.template.mean(axis=0)
+        self.leader = int(self.slots[:, 0].argmax())
+        self.heading = math.radians(spec.team.heading_deg)
+        start, goal = tuple(team.start[self.leader]), tuple(team.goal[self.leader])
+        try:
+            self.path = Geometry(team.scenario).shortest_path(start, goal, self.radius + self.cfg.clearance_margin)
+        except ValueError:  # no path with the margin: fall back to the straight line (it will get stuck, honestly)
+            self.path = np.array([start, goal])
+        self.goal = team.goal
+
+    def act(self, obs: Observation) -> np.ndarray:
+        cfg, p = self.cfg, obs.position
+        lead = p[self.leader]
+        point, direction = _path_point(self.path, lead, cfg.lookahead)
+        if np.linalg.norm(self.goal[self.leader] - lead) > cfg.lookahead:
+            self.heading = math.atan2(direction[1], direction[0])  # the formation turns with the leader's path
+        slots = lead + (self.slots - self.slots[self.leader]) @ rotation(self.heading).T
+        at_goal = np.linalg.norm(self.goal[self.leader] - lead) < 0.5 * cfg.lookahead
+        if at_goal:  # the leader has arrived: everyone takes its own goal slot
+            slots = self.goal
+        v = cfg.gain * (slots - p)
+        lag = float(np.delete(np.linalg.norm(slots - p, axis=1), self.leader).mean()) if len(p) > 1 else 0.0
+        to_point = point - lead if not at_goal else self.goal[self.leader] - lead
+        v[self.leader] = cfg.gain * to_point / (1.0 + cfg.lag_slowdown * lag)
+        self._targets = slots.copy()
+        self._targets[self.leader] = point
+        return self._avoid(v, obs)
+
+    def _avoid(self, v: np.ndarray, obs: Observation) -> np.ndarray:
+        """Collision avoidance: towards any robot or obstacle closer than `avoid_distance` (surface to surface), the
+        approach speed is capped at avoid_gain x (gap - 0.02 m), so robots slide along and stop short of contact."""
+        cfg = self.cfg
+        v = v.copy()
+        rel = obs.rel_position  # [i, j] = p_j - p_i
+        dist = np.linalg.norm(rel, axis=-1)
+        gaps = dist - 2 * self.radius
+        close = obs.neighbours & (gaps < cfg.avoid_distance)
+        o_dir = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
+        for i in range(len(v)):
+            normals = [rel[i, j] / max(dist[i, j], 1e-9) for j in np.flatnonzero(close[i])]
+            limits = [gaps[i, j] for j in np.flatnonzero(close[i])]
+            if obs.obstacle_distance[i] < cfg.avoid_distance:
+                normals.append(o_dir[i])
+                limits.append(obs.obstacle_distance[i])
+            for n_vec, gap in zip(normals, limits, strict=True):
+                excess = float(v[i] @ n_vec) - cfg.avoid_gain * (gap - 0.02)
+                if excess > 0:
+                    v[i] -= excess * n_vec
+        return v
