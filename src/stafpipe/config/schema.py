@@ -116,7 +116,7 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories", "partitions", "training")
+PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity")
 FORMATS = ("png", "pdf", "svg")
 
 
@@ -126,8 +126,8 @@ class PlotConfig:
 
     kind: str = "trajectories"
     """What to draw: `trajectories` (an eval run: STAF Fig. 4 style, one figure per episode log) or `partitions` (an
-    ablate run: its example partitions, and the ARI curve of the noise study) or `training` (a train-ppo or train-high
-    run: its learning curves)."""
+    ablate run: its example partitions, and the ARI curve of the noise study), `training` (a train-ppo or train-high
+    run: its learning curves) or `connectivity` (an eval run: links and lambda2 over time, Cezayirli Fig. 4)."""
     run_dir: str = ""
     """The run directory to draw from."""
     max_episodes: int = 4

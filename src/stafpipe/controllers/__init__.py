@@ -11,6 +11,7 @@ from stafpipe.controllers.base import Controller, Event, TeamInfo
 METHODS: dict[str, tuple[str, str]] = {
     "straight": ("stafpipe.controllers.straight:StraightConfig", "stafpipe.controllers.straight:StraightController"),
     "lf": ("stafpipe.controllers.lf:LFConfig", "stafpipe.controllers.lf:LFController"),
+    "cezayirli": ("stafpipe.controllers.cezayirli:CezayirliConfig", "stafpipe.controllers.cezayirli:CezayirliController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
 }
 

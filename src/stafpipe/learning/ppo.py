@@ -30,6 +30,7 @@ from stafpipe.world import WorldConfig, Worlds
 
 log = logging.getLogger(__name__)
 STATE_FILE = "ppo_state.pt"
+EVAL_SEED = 10_000_019  # evaluation episodes use seeds EVAL_SEED + world, never a training draw
 
 
 def update(policy: DGNNPolicy, opt: torch.optim.Optimizer, ro: Rollout, adv: torch.Tensor, ret: torch.Tensor,
@@ -114,6 +115,11 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
                **{f"charts/{k}": v for k, v in stats.items()}, **losses,
                "charts/fps": samples / (done - began), "charts/rollout_fps": samples / (collected - began),
                "charts/update_seconds": done - collected, "charts/log_std": float(policy.log_std.detach().mean())}
+        if tc.eval_every and ((it + 1) % tc.eval_every == 0 or it + 1 == tc.iterations):
+            worlds = Worlds([s for s, _ in drawn], sensing, world_cfg)  # same scenarios, fixed evaluation seeds
+            obs = worlds.reset([EVAL_SEED + w for w in range(tc.worlds)])
+            _, ev = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [p for _, p in drawn], deterministic=True)
+            row.update({f"eval/{k}": v for k, v in ev.items()})
         history.append(row)
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")
         if (it + 1) % tc.checkpoint_every == 0 or it + 1 == tc.iterations:

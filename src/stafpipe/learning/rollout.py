@@ -54,9 +54,10 @@ def targets(worlds: Worlds, paths: list[np.ndarray] | None, pc: PolicyConfig) ->
 
 
 def collect(policy: DGNNPolicy, worlds: Worlds, obs: Observation, tc: TrainPPOConfig, tolerance: float,
-            sensing_radius: float, paths: list[np.ndarray] | None = None) -> tuple[Rollout, dict[str, float]]:
-    """Run `tc.episode_steps` steps in every world with actions sampled from the policy; `paths` are the worlds'
-    team-centre shortest paths (for `policy.guide=path`)."""
+            sensing_radius: float, paths: list[np.ndarray] | None = None,
+            deterministic: bool = False) -> tuple[Rollout, dict[str, float]]:
+    """Run `tc.episode_steps` steps in every world with actions sampled from the policy (its mean if `deterministic`,
+    as `method=dgnn` evaluates it); `paths` are the worlds' team-centre shortest paths (for `policy.guide=path`)."""
     rc, clip = tc.reward, tc.policy.goal_clip
     buf: dict[str, list] = {k: [] for k in ("own", "edge", "mask", "actions", "logprobs", "values", "rewards")}
     dist = np.linalg.norm(worlds.goal - worlds.pos, axis=-1)
@@ -68,7 +69,7 @@ def collect(policy: DGNNPolicy, worlds: Worlds, obs: Observation, tc: TrainPPOCo
         with torch.no_grad():
             mean, value = policy(own, edge, mask)
             dist_a = policy.distribution(mean)
-            action = dist_a.sample()
+            action = mean if deterministic else dist_a.sample()
             logprob = dist_a.log_prob(action).sum(-1)
         obs, events = worlds.step(commands(action.numpy(), worlds.heading, worlds.robot.max_speed))
         hits += sum(len(e) for e in events)

@@ -36,7 +36,12 @@ def ppo_figure(history: list[dict[str, float]]) -> Figure:
     x = [row["robot_steps"] / 1e6 for row in history]
     for k, (key, title) in enumerate(PPO_PANELS):
         ax = fig.add_subplot(2, 3, k + 1)
-        ax.plot(x, [row.get(key, float("nan")) for row in history])
+        ax.plot(x, [row.get(key, float("nan")) for row in history], label="sampled actions")
+        eval_key = key.replace("charts/", "eval/")
+        if eval_key != key and any(eval_key in row for row in history):
+            pts = [(xv, row[eval_key]) for xv, row in zip(x, history, strict=True) if eval_key in row]
+            ax.plot(*zip(*pts), "o-", ms=3, label="mean action (eval)")
+            ax.legend(fontsize=7)
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("robot-steps (millions)", fontsize=8)
         ax.grid(alpha=0.3)

@@ -75,3 +75,25 @@ def trajectory_figure(rec: EpisodeRecord, title: str = "") -> Figure:
 def episode_files(run_dir: Path) -> list[Path]:
     """The episode logs of an eval run directory, in episode order."""
     return sorted((run_dir / "episodes").glob("*.mcap")) if (run_dir / "episodes").is_dir() else []
+
+
+def connectivity_figure(records: list[EpisodeRecord]) -> Figure:
+    """Cezayirli Fig. 4 style: number of links (robot pairs within the sensing radius) over time for each episode, with
+    the N - 1 links a connected team cannot go below, and the algebraic connectivity lambda2 below it."""
+    from stafpipe.metrics import connectivity
+
+    fig = Figure(figsize=(7.0, 4.6))
+    ax, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
+    for rec in records:
+        links, lam2 = connectivity(rec.positions, float(rec.context["sensing_radius"]))
+        ax.plot(rec.time, links, lw=1.0, label=f"seed {rec.seed}")
+        ax2.plot(rec.time, lam2, lw=1.0)
+    n = records[0].positions.shape[1]
+    ax.axhline(n - 1, color="k", ls="--", lw=0.8, label=f"N - 1 = {n - 1}")
+    ax.set_ylabel("links")
+    ax.legend(fontsize=7)
+    ax2.axhline(0.0, color="k", ls="--", lw=0.8)
+    ax2.set_ylabel("lambda2")
+    ax2.set_xlabel("time (s)")
+    fig.tight_layout()
+    return fig

@@ -30,6 +30,17 @@ def _trajectory_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     return {f"trajectories_{path.stem}": trajectory_figure(rec) for path, rec in zip(files, records, strict=True)}
 
 
+def _connectivity_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
+    from stafpipe.episode_log import read_episode
+    from stafpipe.plots.trajectories import connectivity_figure, episode_files
+
+    files = episode_files(run_dir)
+    if not files:
+        raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
+    files = files[: pc.max_episodes] if pc.max_episodes else files
+    return {"connectivity": connectivity_figure([read_episode(f) for f in files])}
+
+
 def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     """The partitions of an ablate run (and its ARI curve for the noise study), from its tables."""
     from stafpipe.plots.partitions import ari_figure, partition_figure
@@ -73,7 +84,8 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     run_dir = Path(pc.run_dir)
     if not run_dir.is_dir():
         raise StafpipeError(f"plot.run_dir: no such directory: {run_dir}")
-    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures}[pc.kind]
+    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures,
+            "connectivity": _connectivity_figures}[pc.kind]
     outputs: list[Path] = []
     for name, fig in draw(pc, run_dir).items():
         for fmt in pc.formats:

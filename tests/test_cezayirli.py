@@ -1,0 +1,72 @@
+"""Cezayirli & Kerestecioglu's Local Steering Strategy: gradients, Theorem 1's constraints on a random run, settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stafpipe.controllers.base import TeamInfo
+from stafpipe.controllers.cezayirli import CezayirliConfig, CezayirliController, Switch, cost_gradient
+from stafpipe.errors import ConfigError
+from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
+from stafpipe.sensing import SensingConfig
+from stafpipe.world import Worlds
+
+D_MAX, DR = 30.0, 0.9
+
+
+def test_cost_gradients_have_known_values() -> None:
+    cfg = CezayirliConfig(d0=8.0, d1=4.0, beta=0.5)
+    x = np.array([[10.0, 0.0], [0.0, -4.0]])
+    # (6): sum 2 (||z|| - d0) z/||z||, z = -x: 2 * 2 * (-1, 0) + 2 * (-4) * (0, 1)
+    assert np.allclose(cost_gradient(x, "spread", cfg, np.array([1.0, 0.0])), [-4.0, -8.0])
+    # (5): unit z of the farthest robot
+    assert np.allclose(cost_gradient(x, "max", cfg, np.array([1.0, 0.0])), [-1.0, 0.0])
+    # (10) with e_l = +x: robot (0, -4) projects to 0 >= 0 and is nearer, so it is a: z_a + d1 e_l = (4, 4); the
+    # other, z = (-10, 0), adds beta * 2 * (10 - 4) * (-1, 0)
+    assert np.allclose(cost_gradient(x, "line", cfg, np.array([1.0, 0.0])), [4.0 - 6.0, 4.0])
+    behind = np.array([[10.0, 0.0], [-1.0, -4.0]])  # now a = (10, 0): z_a + d1 e_l = (-6, 0)
+    z = np.array([1.0, 4.0])
+    expected = np.array([-6.0, 0.0]) + 0.5 * 2 * (np.linalg.norm(z) - 4.0) * z / np.linalg.norm(z)
+    assert np.allclose(cost_gradient(behind, "line", cfg, np.array([1.0, 0.0])), expected)
+
+
+def test_theorem_1_constraints_hold_on_every_step_of_a_random_run() -> None:
+    spec = build_scenario(ScenarioConfig(name="open", world=WorldBounds(0, 0, 200, 200), obstacles=[],
+                                         reference_path=[[150.0, 100.0]],
+                                         team=TeamSpec(n=8, formation="circle", spacing=6.0, start=(100.0, 100.0),
+                                                       goal=(150.0, 150.0), heading_deg=0.0)))
+    spec = build_scenario(type(spec.spec)(**{**spec.spec.__dict__, "robot": type(spec.spec.robot)(
+        radius=0.75, max_speed=2.0, max_accel=100.0, drive="holonomic", max_turn_rate=2.0)}))
+    sensing = SensingConfig(radius=D_MAX, range_error=DR, bearing_error_deg=12.0, occlusion=True)
+    cfg = CezayirliConfig(initial_cost="spread", switches=[Switch(at=[120.0, 100.0], cost="line", radius=30.0)])
+    worlds = Worlds([spec], sensing)
+    obs = worlds.reset([3]).world(0)
+    controller = CezayirliController(cfg)
+    controller.reset(TeamInfo(spec, obs.position.copy(), worlds.goal[0].copy(), spec.template(), np.zeros((0, 2)), 10.0))
+    d_m = D_MAX - DR
+    checked = 0
+    for _ in range(150):
+        step = controller.act(obs) * cfg.period  # x_i^i(t + dt) in local coordinates
+        for i in range(len(step)):
+            x = obs.rel_position[i][obs.neighbours[i]]
+            s = step[i]
+            behind = x @ s <= 0
+            if behind.any():  # (1)
+                assert np.linalg.norm(s) <= 0.5 * (d_m - np.linalg.norm(x[behind], axis=1).max()) + 1e-9
+            if (~behind).any():  # (2)
+                assert s @ s <= (x[~behind] @ s).min() + 1e-9
+            checked += 1
+        obs, _ = worlds.step(step[None] / cfg.period)
+        obs = obs.world(0)
+    assert checked == 150 * 8
+    assert controller.cost[1:] != ["spread"] * 7  # followers reached the switching point and changed cost
+
+
+def test_bad_settings_are_refused() -> None:
+    with pytest.raises(ConfigError, match="d_max"):
+        CezayirliConfig(d_max=1.0, range_error=1.0).check()
+    with pytest.raises(ConfigError, match="d0"):
+        CezayirliConfig(d0=40.0).check()
+    with pytest.raises(ConfigError, match="costs must be"):
+        CezayirliConfig(switches=[Switch(cost="zigzag")]).check()
