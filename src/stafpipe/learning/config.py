@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from stafpipe.errors import require
+from stafpipe.formations import FORMATION_TYPES
 
 
 @dataclass
@@ -59,6 +60,9 @@ class TrainPPOConfig:
     """Control steps per episode (x world.control_dt s); a truncation, bootstrapped from the value."""
     scenarios: list[str] = field(default_factory=lambda: ["corridor"])
     """Curriculum: each world of each iteration draws one of these built-in scenario names (or paths)."""
+    formations: list[str] = field(default_factory=lambda: ["circle", "wedge", "line"])
+    """Curriculum: ... and one of these team formations (STAF Table 1's three); empty: the scenario's own (or the
+    `formation` group's)."""
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip: float = 0.2
@@ -85,6 +89,8 @@ class TrainPPOConfig:
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
+        for kind in self.formations:
+            require(kind in FORMATION_TYPES, f"{key}.formations", f"entries must be in {list(FORMATION_TYPES)}", kind)
         require(len(self.scenarios) > 0, f"{key}.scenarios", "must name at least one scenario", self.scenarios)
         require(0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1, f"{key}.gamma/gae_lambda", "must be in (0, 1]",
                 (self.gamma, self.gae_lambda))

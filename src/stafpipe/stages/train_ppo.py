@@ -8,6 +8,7 @@ every `train_ppo.checkpoint_every` iterations), `learning_curves.parquet/.csv` (
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -67,6 +68,9 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     world_cfg: WorldConfig = OmegaConf.to_object(cfg.world)  # type: ignore[assignment]
     sensing: SensingConfig = OmegaConf.to_object(cfg.sensing)  # type: ignore[assignment]
     pool = [with_overrides(load_named_scenario(name), cfg) for name in tc.scenarios]
+    if tc.formations:  # every scenario with every formation of the curriculum
+        pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
+                for s in pool for kind in tc.formations]
     sizes = {s.spec.team.n for s in pool}
     if len(sizes) > 1:
         raise StafpipeError(f"train_ppo.scenarios: all need the same team size (batched worlds), got {sorted(sizes)}")
