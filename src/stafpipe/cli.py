@@ -17,11 +17,8 @@ _HYDRA_ARGS = {"allow_extra_args": True, "ignore_unknown_options": True}
 
 
 def _stage(stage: str, overrides: list[str]) -> None:
-    from stafpipe.launch import STAGE_FUNCTIONS, launch
+    from stafpipe.launch import launch
 
-    if stage not in STAGE_FUNCTIONS:
-        typer.echo(f"stafpipe {stage}: not implemented yet", err=True)
-        raise typer.Exit(2)
     raise typer.Exit(launch(stage, overrides))
 
 

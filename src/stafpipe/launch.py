@@ -30,7 +30,7 @@ from stafpipe.paths import conf_dir
 
 log = logging.getLogger(__name__)
 
-# Stage name (as typed on the command line) -> "module:function". A stage missing here is not implemented yet.
+# Stage name (as typed on the command line) -> "module:function" (a test checks it matches the CLI).
 STAGE_FUNCTIONS: dict[str, str] = {
     "generate": "stafpipe.stages.generate:run_generate",
     "eval": "stafpipe.stages.eval:run_eval",
@@ -59,10 +59,20 @@ def stage_function(stage: str) -> Callable[[DictConfig, Path], list[Path]]:
     return getattr(importlib.import_module(module), name)
 
 
+def _detach_file_logs(out_dir: Path) -> None:
+    """Close and remove the log file handlers Hydra attached for a run in `out_dir`: a later log call in the same
+    process would otherwise reopen a file in a deleted directory."""
+    for logger in [logging.getLogger(), *logging.Logger.manager.loggerDict.values()]:
+        for handler in list(getattr(logger, "handlers", [])):
+            if isinstance(handler, logging.FileHandler) and Path(handler.baseFilename).is_relative_to(out_dir.resolve()):
+                logger.removeHandler(handler)
+                handler.close()
+
+
 def _discard_if_empty(out_dir: Path) -> None:
     # A run that failed before writing any result leaves no directory behind: only Hydra's own files are in it.
     if out_dir.is_dir() and all(p.name == ".hydra" or p.suffix == ".log" for p in out_dir.iterdir()):
-        logging.shutdown()
+        _detach_file_logs(out_dir)
         shutil.rmtree(out_dir, ignore_errors=True)
         try:  # and its date folder, if this run was the only one in it
             out_dir.parent.rmdir()

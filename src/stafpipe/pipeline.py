@@ -105,7 +105,8 @@ def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("
     plan: list[tuple[PipelineStep, list[str], Path, str]] = []
     for i, step in enumerate(pipe.steps):  # compose every step first: a bad config stops the pipeline before any work
         if step.stage not in STAGE_FUNCTIONS:
-            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}': stage {step.stage} is not implemented yet")
+            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}': unknown stage {step.stage!r}; stages: "
+                                f"{sorted(STAGE_FUNCTIONS)}")
 
         def ref(match: re.Match[str], _step: PipelineStep = step) -> str:
             if match.group(1) not in dirs:
