@@ -7,17 +7,14 @@ HighLevelConfig fields), `state_dict`, and `made_by` (training config, seed, sta
 from __future__ import annotations
 
 import dataclasses
-import io
 from pathlib import Path
 from typing import Any
-
-import torch
 
 from stafpipe.errors import StafpipeError
 from stafpipe.highlevel.config import HighLevelConfig
 from stafpipe.highlevel.model import DeepGraphCut
-from stafpipe.io import atomic_write
 from stafpipe.paths import package_dir
+from stafpipe.torch_io import load_payload, save_payload
 
 FORMAT = "stafpipe.high_level/1"
 SHIPPED = "checkpoints/high_level.pt"
@@ -36,9 +33,7 @@ def save_checkpoint(path: Path, model: DeepGraphCut, made_by: dict[str, Any]) ->
     """Write atomically: a killed save never leaves a half-written checkpoint."""
     payload = {"format": FORMAT, "high": dataclasses.asdict(model.cfg), "state_dict": model.state_dict(),
                "made_by": made_by}
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    return atomic_write(Path(path), lambda tmp: tmp.write_bytes(buf.getvalue()))
+    return save_payload(Path(path), payload)
 
 
 def load_checkpoint(path: str | Path = "", overrides: HighLevelConfig | None = None) -> tuple[DeepGraphCut, dict[str, Any]]:
@@ -47,12 +42,7 @@ def load_checkpoint(path: str | Path = "", overrides: HighLevelConfig | None = N
     The architecture comes from the checkpoint; `overrides` only supplies inference settings (m, safe_gap, checkpoint).
     """
     path = Path(path) if path else shipped_path()
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises several kinds for a damaged file
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    payload = load_payload(path, CheckpointError, "checkpoint")
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
         raise CheckpointError(f"{path}: not a stafpipe high-level checkpoint (format {found!r}, expected {FORMAT!r})")

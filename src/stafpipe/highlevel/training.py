@@ -24,7 +24,7 @@ from stafpipe.highlevel.config import HighLevelConfig, LossWeights, TrainHighCon
 from stafpipe.highlevel.graphs import TeamGraph, collate
 from stafpipe.highlevel.loss import TERMS, loss_terms, total_loss
 from stafpipe.highlevel.model import DeepGraphCut
-from stafpipe.io import atomic_write
+from stafpipe.torch_io import save_payload
 from stafpipe.training_record import commit
 
 log = logging.getLogger(__name__)
@@ -100,20 +100,12 @@ def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, s
         history.append(row)
         state = {"config_hash": config_hash, "epoch": epoch + 1, "model": model.state_dict(),
                  "optimizer": opt.state_dict(), "history": history}
-        _save_state(state_path, state)
+        save_payload(state_path, state)
         after_epoch(epoch + 1)
     made_by = {**made_by, "train_high": asdict(tc), "seed": seed, "stafpipe_version": __version__, "commit": commit(),
                "final": history[-1] if history else {}}
     save_checkpoint(out_dir / "high_level.pt", model, made_by)
     return model, history
-
-
-def _save_state(path: Path, state: dict[str, Any]) -> None:
-    import io
-
-    buf = io.BytesIO()
-    torch.save(state, buf)
-    atomic_write(path, lambda tmp: tmp.write_bytes(buf.getvalue()))
 
 
 def after_epoch(epoch: int) -> None:

@@ -3,17 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
-import io
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from stafpipe.errors import StafpipeError
-from stafpipe.io import atomic_write
 from stafpipe.learning.config import PolicyConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.paths import package_dir
+from stafpipe.torch_io import load_payload, save_payload
 
 FORMAT = "stafpipe.policy/1"
 
@@ -29,20 +26,13 @@ def shipped_policy(method: str) -> Path:
 def save_policy(path: Path, method: str, policy: DGNNPolicy, made_by: dict[str, Any]) -> Path:
     payload = {"format": FORMAT, "method": method, "policy": dataclasses.asdict(policy.cfg),
                "state_dict": policy.state_dict(), "made_by": made_by}
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    return atomic_write(Path(path), lambda tmp: tmp.write_bytes(buf.getvalue()))
+    return save_payload(Path(path), payload)
 
 
 def load_policy(path: str | Path, method: str) -> tuple[DGNNPolicy, dict[str, Any]]:
     """The policy of a checkpoint (`path` empty: the one shipped for `method`), in eval mode, and its record."""
     path = Path(path) if path else shipped_policy(method)
-    if not path.is_file():
-        raise PolicyCheckpointError(f"{path}: no such policy checkpoint (train one with `stafpipe train-ppo`)")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises several kinds for a damaged file
-        raise PolicyCheckpointError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from None
+    payload = load_payload(path, PolicyCheckpointError, "policy checkpoint", "train one with `stafpipe train-ppo`")
     if not isinstance(payload, dict) or payload.get("format") != FORMAT or payload.get("method") != method:
         found = (payload.get("format"), payload.get("method")) if isinstance(payload, dict) else type(payload).__name__
         raise PolicyCheckpointError(f"{path}: not a stafpipe {method} policy checkpoint (found {found})")

@@ -9,23 +9,21 @@ resume point: a resumed run ends with the same weights as an uninterrupted one.
 
 from __future__ import annotations
 
-import io
 import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
-from stafpipe.io import atomic_write
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.rollout import Rollout, collect, gae
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import SensingConfig
+from stafpipe.torch_io import save_payload
 from stafpipe.world import WorldConfig, Worlds
 
 log = logging.getLogger(__name__)
@@ -70,12 +68,6 @@ def update(policy: DGNNPolicy, opt: torch.optim.Optimizer, ro: Rollout, adv: tor
             out["losses/entropy"] += float(entropy.detach())
             count += 1
     return {k: v / count for k, v in out.items()}
-
-
-def save_state(path: Path, state: dict[str, Any]) -> None:
-    buf = io.BytesIO()
-    torch.save(state, buf)
-    atomic_write(path, lambda tmp: tmp.write_bytes(buf.getvalue()))
 
 
 def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[tuple[Scenario, np.ndarray]]],
@@ -123,7 +115,7 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         history.append(row)
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")
         if (it + 1) % tc.checkpoint_every == 0 or it + 1 == tc.iterations:
-            save_state(out_dir / STATE_FILE, {"config_hash": config_hash, "iteration": it + 1,
+            save_payload(out_dir / STATE_FILE, {"config_hash": config_hash, "iteration": it + 1,
                                               "policy": policy.state_dict(), "optimizer": opt.state_dict(),
                                               "torch_rng": torch.get_rng_state(), "minibatch_rng": gen.get_state(),
                                               "history": history})
