@@ -60,7 +60,8 @@ def test_theorem_1_constraints_hold_on_every_step_of_a_random_run() -> None:
         obs, _ = worlds.step(step[None] / cfg.period)
         obs = obs.world(0)
     assert checked == 150 * 8
-    assert controller.cost[1:] != ["spread"] * 7  # followers reached the switching point and changed cost
+    followers = [c for i, c in enumerate(controller.cost) if i != controller.leader]
+    assert followers.count("line") >= 1  # followers reached the switching point and changed cost
 
 
 def test_bad_settings_are_refused() -> None:

@@ -32,13 +32,25 @@ def scenario_from_yaml(text: str) -> Scenario:
     return build_scenario(spec)  # type: ignore[arg-type]
 
 
+def _route(scenario: Scenario) -> list[tuple[float, float]]:
+    t = scenario.spec.team
+    return [tuple(t.start), *[tuple(p) for p in scenario.spec.reference_path], tuple(t.goal)]
+
+
+def team_path(scenario: Scenario, geometry: Geometry) -> np.ndarray:
+    """The formation centre's shortest collision-free path from start to goal through the reference waypoints (K, 2),
+    keeping one robot radius from obstacles: what controllers get as TeamInfo.path."""
+    route = _route(scenario)
+    legs = [geometry.shortest_path(a, b, scenario.spec.robot.radius) for a, b in zip(route[:-1], route[1:], strict=True)]
+    return np.concatenate([legs[0], *[leg[1:] for leg in legs[1:]]])
+
+
 def episode_context(scenario: Scenario, geometry: Geometry, sensing: SensingConfig, goal_tolerance: float,
                     cfi_margin: float) -> tuple[MetricContext, np.ndarray]:
     """Metric context (eta and the travel-time lower bound from geometry) and the centre's shortest path."""
     t, r = scenario.spec.team, scenario.spec.robot
-    route = [tuple(t.start), *[tuple(p) for p in scenario.spec.reference_path], tuple(t.goal)]
-    legs = [geometry.shortest_path(a, b, r.radius) for a, b in zip(route[:-1], route[1:], strict=True)]
-    path = np.concatenate([legs[0], *[leg[1:] for leg in legs[1:]]])
+    route = _route(scenario)
+    path = team_path(scenario, geometry)
     eta = min(geometry.passage_width(a, b) for a, b in zip(route[:-1], route[1:], strict=True))
     per_robot = float(np.linalg.norm(np.subtract(t.goal, t.start)))  # every slot moves by the centre's displacement
     lower_bound = max(path_length(path), per_robot) / r.max_speed

@@ -144,3 +144,19 @@ class Geometry:
 def path_length(path: np.ndarray) -> float:
     """Length of a polyline (K, 2)."""
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+
+
+def point_ahead(path: np.ndarray, points: np.ndarray, ahead: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point (P, 2): the point `ahead` metres beyond its projection on the polyline `path` (K, 2) (capped at
+    the end), the path's unit direction there, and the arc length still left after the projection."""
+    seg = np.diff(path, axis=0)
+    length = np.maximum(np.linalg.norm(seg, axis=1), 1e-9)
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    t = np.clip(np.einsum("pkd,kd->pk", points[:, None] - path[None, :-1], seg) / length**2, 0.0, 1.0)
+    proj = path[None, :-1] + t[..., None] * seg[None]
+    k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
+    arc = cum[k] + t[np.arange(len(points)), k] * length[k]
+    target = np.minimum(arc + ahead, cum[-1])
+    j = np.clip(np.searchsorted(cum, target, side="right") - 1, 0, len(seg) - 1)
+    direction = seg[j] / length[j][:, None]
+    return path[j] + (target - cum[j])[:, None] * direction, direction, cum[-1] - arc

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -53,3 +53,9 @@ def markdown_table(df, digits: int = 3) -> str:  # noqa: ANN001 (a pandas DataFr
     lines = ["| " + " | ".join(map(str, df.columns)) + " |", "|" + "---|" * len(df.columns)]
     lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in df.itertuples(index=False)]
     return "\n".join(lines) + "\n"
+
+
+def save_figure(fig, stem: Path, formats: Sequence[str] = ("png", "pdf"), dpi: int = 130) -> list[Path]:  # noqa: ANN001
+    """A matplotlib Figure as `stem.<format>` for each format, each written atomically."""
+    return [atomic_write(stem.with_name(f"{stem.name}.{fmt}"), lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=dpi))
+            for fmt in formats]

@@ -19,7 +19,7 @@ import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo
 from stafpipe.formations import rotation
-from stafpipe.geometry import Geometry
+from stafpipe.geometry import Geometry, point_ahead
 from stafpipe.sensing import Observation
 
 
@@ -40,18 +40,6 @@ class LFConfig:
     """Allowed approach speed (m/s) per metre of gap left (minus 0.02 m)."""
     clearance_margin: float = 0.1
     """Added to the robot radius as the leader path's clearance from obstacles (m)."""
-
-
-def _path_point(path: np.ndarray, p: np.ndarray, ahead: float) -> tuple[np.ndarray, np.ndarray]:
-    """The point `ahead` metres beyond the projection of p on the polyline, and the path's unit direction there."""
-    seg = np.diff(path, axis=0)
-    length = np.maximum(np.linalg.norm(seg, axis=1), 1e-9)
-    cum = np.concatenate([[0.0], np.cumsum(length)])
-    t = np.clip(((p - path[:-1]) * seg).sum(1) / length**2, 0.0, 1.0)
-    k = int(np.linalg.norm(path[:-1] + t[:, None] * seg - p, axis=1).argmin())
-    s = min(cum[k] + t[k] * length[k] + ahead, cum[-1])
-    j = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
-    return path[j] + (s - cum[j]) / length[j] * seg[j], seg[j] / length[j]
 
 
 class LFController(Controller):
@@ -79,7 +67,8 @@ class LFController(Controller):
     def act(self, obs: Observation) -> np.ndarray:
         cfg, p = self.cfg, obs.position
         lead = p[self.leader]
-        point, direction = _path_point(self.path, lead, cfg.lookahead)
+        points, directions, _ = point_ahead(self.path, lead[None], cfg.lookahead)
+        point, direction = points[0], directions[0]
         if np.linalg.norm(self.goal[self.leader] - lead) > cfg.lookahead:
             self.heading = math.atan2(direction[1], direction[0])  # the formation turns with the leader's path
         slots = lead + (self.slots - self.slots[self.leader]) @ rotation(self.heading).T

@@ -8,7 +8,7 @@ import numpy as np
 import torch
 
 from stafpipe.highlevel.config import HighLevelConfig
-from stafpipe.highlevel.graphs import Team, collate, team_graph
+from stafpipe.highlevel.graphs import Team, TeamGraph, collate, team_graph
 from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut
 from stafpipe.highlevel.partition import choose_m, hard_assignment
 
@@ -17,11 +17,15 @@ SMALL_TEAM = 64
 """A single team up to this size is decided by the numpy forward pass (same output, a fraction of the time)."""
 
 
-@torch.no_grad()
 def predict(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
     """Y (n, m_max) of each team (rows sum to 1 over its first m columns)."""
     cfg = model.cfg
-    graphs = [team_graph(t, cfg.features, cfg.radius) for t in teams]
+    return _predict(model, teams, [team_graph(t, cfg.features, cfg.radius) for t in teams])
+
+
+@torch.no_grad()
+def _predict(model: DeepGraphCut, teams: Sequence[Team], graphs: list[TeamGraph]) -> list[np.ndarray]:
+    cfg = model.cfg
     if len(teams) == 1 and teams[0].n <= SMALL_TEAM:
         return [NumpyGraphCut(model)(graphs[0].x, graphs[0].edges, min(teams[0].m, cfg.m_max))]
     y = model(collate(graphs, [min(t.m, cfg.m_max) for t in teams])).numpy()
@@ -32,13 +36,13 @@ def predict(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
 def divide(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
     """Subteam label (0 .. m-1) of every robot of each team: argmax of Y, repaired (non-empty, connected where possible)."""
     cfg = model.cfg
+    graphs = [team_graph(t, cfg.features, cfg.radius) for t in teams]
     out = []
-    for team, y in zip(teams, predict(model, teams), strict=True):
+    for team, graph, y in zip(teams, graphs, _predict(model, teams, graphs), strict=True):
         if team.m <= 1:
             out.append(np.zeros(team.n, dtype=int))
             continue
-        edges = team_graph(team, ["pos"], cfg.radius).edges
-        out.append(hard_assignment(y, edges, min(team.m, cfg.m_max)))
+        out.append(hard_assignment(y, graph.edges, min(team.m, cfg.m_max)))
     return out
 
 

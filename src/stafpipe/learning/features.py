@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from stafpipe.geometry import point_ahead
 from stafpipe.sensing import Observation
 
 OWN, EDGE = 7, 5
@@ -36,17 +37,8 @@ def _rotate(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
 def guide_targets(pos: np.ndarray, goal: np.ndarray, path: np.ndarray, lookahead: float, release: float) -> np.ndarray:
     """(n, 2) targets of one world's robots: the point `lookahead` ahead of each robot's projection on `path` (K, 2),
     or the robot's own goal once its projection is within `release` of the path's end."""
-    seg = np.diff(path, axis=0)
-    length = np.maximum(np.linalg.norm(seg, axis=1), 1e-9)
-    cum = np.concatenate([[0.0], np.cumsum(length)])
-    t = np.clip(np.einsum("nkd,kd->nk", pos[:, None] - path[None, :-1], seg) / length**2, 0.0, 1.0)
-    proj = path[None, :-1] + t[..., None] * seg[None]
-    k = np.linalg.norm(pos[:, None] - proj, axis=-1).argmin(axis=1)
-    arc = cum[k] + t[np.arange(len(pos)), k] * length[k]
-    ahead = np.minimum(arc + lookahead, cum[-1])
-    j = np.clip(np.searchsorted(cum, ahead, side="right") - 1, 0, len(seg) - 1)
-    point = path[j] + ((ahead - cum[j]) / length[j])[:, None] * seg[j]
-    return np.where((cum[-1] - arc < release)[:, None], goal, point)
+    point, _, left = point_ahead(path, pos, lookahead)
+    return np.where((left < release)[:, None], goal, point)
 
 
 def features(obs: Observation, goal_clip: float, sensing_radius: float, target: np.ndarray | None = None) -> Features:

@@ -37,7 +37,7 @@ def update(policy: DGNNPolicy, opt: torch.optim.Optimizer, ro: Rollout, adv: tor
     t, b = ro.rewards.shape[:2]
     flat = lambda x: x.reshape(t * b, *x.shape[2:])  # noqa: E731
     b_own, b_edge, b_mask, b_act = flat(ro.own), flat(ro.edge), flat(ro.mask), flat(ro.actions)
-    b_logp, b_val, b_adv, b_ret = flat(ro.logprobs), flat(ro.values), flat(adv), flat(ret)
+    b_logp, b_adv, b_ret = flat(ro.logprobs), flat(adv), flat(ret)
     size = t * b // tc.minibatches
     out = {"losses/policy": 0.0, "losses/value": 0.0, "losses/entropy": 0.0, "losses/approx_kl": 0.0,
            "losses/clipfrac": 0.0}

@@ -11,7 +11,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
 
 from stafpipe.episode import scenario_from_yaml
-from stafpipe.episode_log import EpisodeRecord, read_episode
+from stafpipe.episode_log import EpisodeRecord
 from stafpipe.scenario import Scenario
 
 OBSTACLE_GREY = "0.6"

@@ -14,7 +14,7 @@ from pathlib import Path
 from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.highlevel.config import AblateConfig, HighLevelConfig, TrainHighConfig
-from stafpipe.io import atomic_write, markdown_table, write_table
+from stafpipe.io import atomic_write, markdown_table, save_figure, write_table
 
 log = logging.getLogger(__name__)
 GROUPS = {"loss_terms": ["variant", "labels"], "subteam_count": ["formation", "m"], "noise": ["sigma"],
@@ -22,12 +22,6 @@ GROUPS = {"loss_terms": ["variant", "labels"], "subteam_count": ["formation", "m
 TITLES = {"loss_terms": "Loss ablation (STAF Fig. 7): raw argmax of each variant's network",
           "subteam_count": "Subteam count (STAF Fig. 9)", "noise": "Position noise (STAF Fig. 14)",
           "classical": "Learned cut vs classical partitions"}
-
-
-def save_figure(fig, path_stem: Path) -> list[Path]:  # noqa: ANN001 (a matplotlib Figure)
-    """PNG and PDF of `fig`, written atomically."""
-    return [atomic_write(path_stem.with_suffix(f".{fmt}"), lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=130))
-            for fmt in ("png", "pdf")]
 
 
 def run_ablate(cfg: DictConfig, out_dir: Path) -> list[Path]:

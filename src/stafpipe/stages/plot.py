@@ -12,7 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config.schema import PlotConfig
 from stafpipe.errors import StafpipeError
-from stafpipe.io import atomic_write
+from stafpipe.io import save_figure
 
 log = logging.getLogger(__name__)
 
@@ -88,8 +88,7 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
             "connectivity": _connectivity_figures}[pc.kind]
     outputs: list[Path] = []
     for name, fig in draw(pc, run_dir).items():
-        for fmt in pc.formats:
-            outputs.append(atomic_write(out_dir / f"{name}.{fmt}", lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=pc.dpi)))
+        outputs += save_figure(fig, out_dir / name, pc.formats, pc.dpi)
         log.info("drew %s", name)
     print("\n".join(str(p) for p in outputs))
     return outputs

@@ -16,7 +16,7 @@ from omegaconf import DictConfig, OmegaConf
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.errors import StafpipeError
 from stafpipe.highlevel.config import HighLevelConfig, TrainHighConfig
-from stafpipe.io import atomic_write, write_table
+from stafpipe.io import save_figure, write_table
 
 log = logging.getLogger(__name__)
 REQUIRED_COLUMNS = ("instance", "robot", "x", "y", "goal_x", "goal_y")
@@ -67,9 +67,7 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by)
     outputs = [out_dir / "high_level.pt", out_dir / "last.pt"]
     outputs += write_table(pd.DataFrame(history), out_dir / "losses")
-    fig = loss_curve_figure(history)
-    for fmt in ("png", "pdf"):
-        outputs.append(atomic_write(out_dir / f"loss_curves.{fmt}", lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=120)))
+    outputs += save_figure(loss_curve_figure(history), out_dir / "loss_curves", dpi=120)
     final = history[-1]
     log.info("final losses: %s", {k: round(v, 4) for k, v in final.items()})
     return outputs

@@ -17,7 +17,7 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.errors import StafpipeError
-from stafpipe.io import atomic_write, write_table
+from stafpipe.io import save_figure, write_table
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.paths import conf_dir
 from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
@@ -29,14 +29,6 @@ def load_named_scenario(name: str) -> Scenario:
     """A built-in scenario by name (conf/scenario/<name>.yaml) or a scenario file by path."""
     builtin = conf_dir() / "scenario" / f"{name}.yaml"
     return build_scenario(load_scenario_file(builtin if builtin.is_file() else Path(name)))
-
-
-def team_path(scenario: Scenario, sensing) -> np.ndarray:  # noqa: ANN001 (a SensingConfig)
-    """The team centre's shortest path on the map, as the harness gives it to controllers (TeamInfo.path)."""
-    from stafpipe.episode import episode_context
-    from stafpipe.geometry import Geometry
-
-    return episode_context(scenario, Geometry(scenario), sensing, 0.3, 0.0)[1]
 
 
 def resume_state(out_dir: Path, digest: str) -> Path | None:
@@ -54,6 +46,8 @@ def resume_state(out_dir: Path, digest: str) -> Path | None:
 
 
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
+    from stafpipe.episode import team_path
+    from stafpipe.geometry import Geometry
     from stafpipe.launch import config_hash
     from stafpipe.learning.checkpoint import save_policy
     from stafpipe.learning.ppo import STATE_FILE, train_ppo
@@ -77,7 +71,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     if any(s.spec.robot != pool[0].spec.robot for s in pool):
         raise StafpipeError("train_ppo.scenarios: all need the same robot (set the `robot` group to make them equal)")
 
-    paths = [team_path(s, sensing) for s in pool]
+    paths = [team_path(s, Geometry(s)) for s in pool]
 
     def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray]]:
         return [(pool[int(k)], paths[int(k)]) for k in rng.integers(len(pool), size=count)]
@@ -99,9 +93,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
                "commit": commit(), "iterations": len(history), "final": history[-1] if history else {}}
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
     outputs += write_table(pd.DataFrame(history), curves)
-    fig = ppo_figure(history)
-    outputs += [atomic_write(out_dir / f"learning_curves.{f}", lambda tmp, f=f: fig.savefig(tmp, format=f, dpi=120))
-                for f in ("png", "pdf")]
+    outputs += save_figure(ppo_figure(history), curves, dpi=120)
     last = history[-1]
     log.info("iteration %d: success rate %.3f, return %.2f", last["iteration"], last["charts/success_rate"],
              last["charts/episode_return"])
