@@ -57,6 +57,9 @@ class Observation(NamedTuple):
     """(.., n, n, 2) [i, j]: velocity of j minus that of i."""
     time: np.ndarray
     """(..,) seconds since the episode started."""
+    movers: np.ndarray
+    """(.., M, 4) moving obstacles: x, y, vx, vy (a walking human tracked by motion capture, Zhu et al. 2019 Section
+    V-B); padding rows of a batch are far away and still."""
 
     def world(self, b: int) -> "Observation":
         """The observation of world `b` of a batch."""
@@ -87,6 +90,7 @@ def observe(
     robot_radius: float,
     cfg: SensingConfig,
     rngs: list[np.random.Generator],
+    movers: np.ndarray | None = None,
 ) -> Observation:
     """Observations of B worlds: pos, vel, goal (B, n, 2); obstacles as capsules seg_a, seg_b (B, C, 2), seg_r (B, C)."""
     # Closest point of every capsule spine, per coordinate: (B, n, C) arrays, no (.., 2) axis (this runs every step).
@@ -125,4 +129,5 @@ def observe(
         if cfg.drop_prob > 0:
             mask &= np.stack([r.random(dist.shape[1:]) >= cfg.drop_prob for r in rngs])
     rel_vel = vel[..., None, :, :] - vel[..., :, None, :]
-    return Observation(own, vel, heading, goal, obstacle, obstacle_distance, mask, measured, rel_vel, time)
+    movers = np.zeros((pos.shape[0], 0, 4)) if movers is None else movers
+    return Observation(own, vel, heading, goal, obstacle, obstacle_distance, mask, measured, rel_vel, time, movers)

@@ -192,6 +192,8 @@ class Worlds:
         self.rngs = [np.random.default_rng(0) for _ in scenarios]
         self._mover_state: list[list[tuple[np.ndarray, int]]] = [[] for _ in scenarios]
         self._has_movers = [w for w, (_, specs) in enumerate(self._mover_slots) if specs]
+        self.movers = np.zeros((b, max(len(specs) for _, specs in self._mover_slots), 4))
+        self.movers[..., :2] = _FAR
 
     @property
     def size(self) -> int:
@@ -234,6 +236,7 @@ class Worlds:
                 p = np.array(body.position)
                 self.seg_a[w, first + k] = self.seg_b[w, first + k] = p
                 self.seg_r[w, first + k] = m.radius
+                self.movers[w, k] = (*p, *body.velocity)
 
     def _mover_velocity(self, w: int, k: int, body: pymunk.Body) -> tuple[float, float]:
         waypoints, target = self._mover_state[w][k]
@@ -282,7 +285,7 @@ class Worlds:
         """Observations of every robot of every world."""
         return observe(
             self.pos, self.vel, self.heading, self.goal, self.time.copy(),
-            self.seg_a, self.seg_b, self.seg_r, self.robot.radius, self.sensing, self.rngs,
+            self.seg_a, self.seg_b, self.seg_r, self.robot.radius, self.sensing, self.rngs, self.movers.copy(),
         )
 
     def mover_positions(self, w: int) -> np.ndarray:

@@ -116,7 +116,7 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity")
+PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity", "regions", "timing")
 FORMATS = ("png", "pdf", "svg")
 
 
@@ -127,11 +127,15 @@ class PlotConfig:
     kind: str = "trajectories"
     """What to draw: `trajectories` (an eval run: STAF Fig. 4 style, one figure per episode log) or `partitions` (an
     ablate run: its example partitions, and the ARI curve of the noise study), `training` (a train-ppo or train-high
-    run: its learning curves) or `connectivity` (an eval run: links and lambda2 over time, Cezayirli Fig. 4)."""
+    run: its learning curves), `connectivity` (an eval run: links and lambda2 over time, Cezayirli Fig. 4), `regions`
+    (an eval run of method=zhu: snapshots of common regions, target formations and robots, Zhu Fig. 4) or `timing`
+    (an eval run of method=zhu: the computation-time table, Zhu Table I, as timing.md and timing.tex)."""
     run_dir: str = ""
     """The run directory to draw from."""
     max_episodes: int = 4
     """Draw at most this many episodes, in episode order (0: all)."""
+    times: list[float] = field(default_factory=list)
+    """`regions`: the snapshot times (s); empty: the first split, the merge after it, and the end."""
     formats: list[str] = field(default_factory=lambda: ["png", "pdf"])
     dpi: int = 150
 

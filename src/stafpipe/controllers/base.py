@@ -74,7 +74,34 @@ class Controller:
         """Record an event for the log."""
         self._events.append(Event(kind, robots, detail))
 
+    def episode_stats(self) -> dict[str, float]:
+        """Method-specific numbers for the results table (e.g. Zhu's per-part computation times); none by default."""
+        return {}
+
     def drain_events(self) -> list[Event]:
         """The events since the last call."""
         out, self._events = self._events, []
         return out
+
+
+def limit_approach(v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float) -> np.ndarray:
+    """Collision avoidance shared by the classical methods: towards any robot or obstacle closer than `avoid_distance`
+    (surface to surface), the approach speed is capped at avoid_gain x (gap - 0.02 m), so robots slide along and stop
+    short of contact."""
+    v = v.copy()
+    rel = obs.rel_position  # [i, j] = p_j - p_i
+    dist = np.linalg.norm(rel, axis=-1)
+    gaps = dist - 2 * radius
+    close = obs.neighbours & (gaps < avoid_distance)
+    o_dir = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
+    for i in range(len(v)):
+        normals = [rel[i, j] / max(dist[i, j], 1e-9) for j in np.flatnonzero(close[i])]
+        limits = [gaps[i, j] for j in np.flatnonzero(close[i])]
+        if obs.obstacle_distance[i] < avoid_distance:
+            normals.append(o_dir[i])
+            limits.append(obs.obstacle_distance[i])
+        for n_vec, gap in zip(normals, limits, strict=True):
+            excess = float(v[i] @ n_vec) - avoid_gain * (gap - 0.02)
+            if excess > 0:
+                v[i] -= excess * n_vec
+    return v

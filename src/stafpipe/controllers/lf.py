@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stafpipe.controllers.base import Controller, TeamInfo
+from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
 from stafpipe.formations import rotation
 from stafpipe.geometry import Geometry, point_ahead
 from stafpipe.sensing import Observation
@@ -81,26 +81,4 @@ class LFController(Controller):
         v[self.leader] = cfg.gain * to_point / (1.0 + cfg.lag_slowdown * lag)
         self._targets = slots.copy()
         self._targets[self.leader] = point
-        return self._avoid(v, obs)
-
-    def _avoid(self, v: np.ndarray, obs: Observation) -> np.ndarray:
-        """Collision avoidance: towards any robot or obstacle closer than `avoid_distance` (surface to surface), the
-        approach speed is capped at avoid_gain x (gap - 0.02 m), so robots slide along and stop short of contact."""
-        cfg = self.cfg
-        v = v.copy()
-        rel = obs.rel_position  # [i, j] = p_j - p_i
-        dist = np.linalg.norm(rel, axis=-1)
-        gaps = dist - 2 * self.radius
-        close = obs.neighbours & (gaps < cfg.avoid_distance)
-        o_dir = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
-        for i in range(len(v)):
-            normals = [rel[i, j] / max(dist[i, j], 1e-9) for j in np.flatnonzero(close[i])]
-            limits = [gaps[i, j] for j in np.flatnonzero(close[i])]
-            if obs.obstacle_distance[i] < cfg.avoid_distance:
-                normals.append(o_dir[i])
-                limits.append(obs.obstacle_distance[i])
-            for n_vec, gap in zip(normals, limits, strict=True):
-                excess = float(v[i] @ n_vec) - cfg.avoid_gain * (gap - 0.02)
-                if excess > 0:
-                    v[i] -= excess * n_vec
-        return v
+        return limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)

@@ -84,11 +84,12 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     for k in tqdm(range(ev.episodes), desc=f"eval {method_cfg.name} on {scenario.name}", unit="episode", disable=None):
         seed = episode_seed(int(cfg.seed), k)
         log_path = out_dir / "episodes" / f"episode_{k:04d}.mcap" if ev.log_episodes else None
-        values = run_episode(scenario, geometry, make_controller(method_cfg), method_cfg.name, seed, world_cfg,
+        controller = make_controller(method_cfg)
+        values = run_episode(scenario, geometry, controller, method_cfg.name, seed, world_cfg,
                              sensing, ev.goal_tolerance, ev.cfi_margin, log_path)
         rows.append({"episode": k, "seed": seed, "method": method_cfg.name, "scenario": scenario.name,
                      "formation": scenario.spec.team.formation, "n": scenario.spec.team.n,
-                     "drive": scenario.spec.robot.drive, **values})
+                     "drive": scenario.spec.robot.drive, **values, **controller.episode_stats()})
         if log_path:
             outputs.append(log_path)
     df = pd.DataFrame(rows)

@@ -12,7 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config.schema import PlotConfig
 from stafpipe.errors import StafpipeError
-from stafpipe.io import save_figure
+from stafpipe.io import atomic_write, save_figure
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +39,38 @@ def _connectivity_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
         raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
     files = files[: pc.max_episodes] if pc.max_episodes else files
     return {"connectivity": connectivity_figure([read_episode(f) for f in files])}
+
+
+def _region_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
+    from stafpipe.episode_log import read_episode
+    from stafpipe.plots.trajectories import episode_files
+    from stafpipe.plots.zhu import regions_figure, snapshot_times
+
+    files = episode_files(run_dir)
+    if not files:
+        raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
+    files = files[: pc.max_episodes] if pc.max_episodes else files
+    records = [read_episode(f) for f in files]
+    return {f"regions_{path.stem}": regions_figure(rec, list(pc.times) or snapshot_times(rec))
+            for path, rec in zip(files, records, strict=True)}
+
+
+def _timing_tables(run_dir: Path) -> dict[str, str]:
+    """Zhu's Table I from an eval run's results table, as Markdown and LaTeX."""
+    from stafpipe.plots.zhu import latex_table, markdown_timing, timing_table
+
+    path = run_dir / "results.parquet"
+    if not path.is_file():
+        raise StafpipeError(f"plot.run_dir: {run_dir} holds no results.parquet (is it an eval run?)")
+    try:
+        results = pd.read_parquet(path)
+    except Exception as exc:  # pyarrow raises several kinds for a damaged file
+        raise StafpipeError(f"plot.run_dir: {path} is not a readable table ({type(exc).__name__})") from None
+    table = timing_table(results)
+    scen = ", ".join(sorted(set(results["scenario"].astype(str)))) if "scenario" in results else "?"
+    n = ", ".join(str(v) for v in sorted(set(results["n"].tolist()))) if "n" in results else "?"
+    caption = f"Computation time [ms] per cycle, whole team ({scen}, {n} robots, {len(results)} episodes)"
+    return {"timing.md": f"{caption}\n\n{markdown_timing(table)}", "timing.tex": latex_table(table, caption)}
 
 
 def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
@@ -84,9 +116,15 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     run_dir = Path(pc.run_dir)
     if not run_dir.is_dir():
         raise StafpipeError(f"plot.run_dir: no such directory: {run_dir}")
-    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures,
-            "connectivity": _connectivity_figures}[pc.kind]
     outputs: list[Path] = []
+    if pc.kind == "timing":
+        tables = _timing_tables(run_dir)  # read and checked before anything is written
+        for name, text in tables.items():
+            outputs.append(atomic_write(out_dir / name, lambda tmp, text=text: tmp.write_text(text)))
+        print("\n".join(str(p) for p in outputs))
+        return outputs
+    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures,
+            "connectivity": _connectivity_figures, "regions": _region_figures}[pc.kind]
     for name, fig in draw(pc, run_dir).items():
         outputs += save_figure(fig, out_dir / name, pc.formats, pc.dpi)
         log.info("drew %s", name)

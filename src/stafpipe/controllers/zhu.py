@@ -1,0 +1,423 @@
+"""`method=zhu`: distributed formation splitting and merging (Zhu, Juhl, Ferranti, Alonso-Mora, ICRA 2019,
+001_9e11512086778daf.txt), in 2D.
+
+Every `control_period` (the 5 Hz of Section V-A) each robot grows its obstacle-free convex region P_i within its
+visibility r_B (`convex_region.grow_region`; moving obstacles swept over the horizon tau, Eq. (1)), and each (sub)team
+fits its template formation in its common region P^k = ∩ P_i nearest the global reference p_r (Section III, after
+[20]) and assigns robots to slots (Hungarian method; [20] uses a distributed assignment with the same optimum). Every
+`decision_period` (ff = 1 s) the teams run the consensus steps: communication-loss detection, the split check on the
+intersection graph (Algorithm 1) and merging (Algorithm 2). Stuck faults are checked every step (Section IV-D). A
+proportional controller with the shared collision-avoidance cap tracks the slots (the paper's local planner [22]).
+
+The robots' computations are identical given the flooded regions (Remark 1), so each team's decision is computed once
+here; the flooding itself is modelled by the connected components of the team's communication graph
+(`zhu_decisions.comm_components`). Faults are injected from `method.faults` (an actuator fault zeroes the robot's
+velocity, a communication fault silences it); detection never reads that list.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
+from stafpipe.controllers.zhu_decisions import (StuckDetector, comm_components, intersection_graph, merge_candidate,
+                                                merge_requests, mutual_merges, needs_split, split_team)
+from stafpipe.convex_region import (Region, fit_centres, footprint_area, grow_halfplanes, hull_vertices, intersect_all,
+                                    regions_from_halfplanes)
+from stafpipe.errors import require
+from stafpipe.formations import assign_slots, formation_slots, rotation
+from stafpipe.geometry import capsule_arrays
+from stafpipe.sensing import Observation
+
+FAULT_KINDS = ("stuck", "comm")
+TIMED_PARTS = ("convex_regions", "split_check", "graph_partition", "merge_decision", "formation_control")
+"""Table I's rows."""
+
+
+@dataclass
+class ZhuFault:
+    """An injected fault (Section IV-D): robot `robot` is stuck (actuators) or silent (communication) from `start`
+    until `end` seconds (`end: null` = permanent)."""
+
+    robot: int = 0
+    kind: str = "stuck"
+    start: float = 0.0
+    end: float | None = None
+
+
+@dataclass
+class ZhuConfig:
+    """Config of `method=zhu` (group `method`). Defaults: Scenario 1 of Section V-A where the paper gives values."""
+
+    name: str = "zhu"
+    visibility: float = 6.0
+    """r_B, the visibility radius (Section V-A: 6 m). The communication range r_C is sensing.radius (3 m)."""
+    visibility_sides: int = 8
+    """The visibility disc is the regular polygon of this many sides inscribed in it (8: 90 % of the disc's area;
+    fewer sides keep every polygon small, which is what Table I's timings pay for)."""
+    behind: float = 1.0
+    """Ours: a region reaches at most this far (m) behind its robot, seen from p_r, so that it lies where the team is
+    going (Section II: P_i "is likely to make progress"); .inf keeps the whole visibility disc, and so does every
+    region once p_r has reached the goal."""
+    horizon: float = 3.0
+    """tau, the time horizon of the position-time obstacles (1) (Section V-A: 3 s)."""
+    decision_period: float = 1.0
+    """ff: teams check splitting and merging every ff seconds (Section V-A: 1 s)."""
+    control_period: float = 0.2
+    """Regions and target formations are recomputed at the local planner's 5 Hz (Section V-A)."""
+    v_min: float | None = None
+    """V_min (Section IV-B), m^2; null: the footprint of the team's template (hull dilated by the robot radius)."""
+    p_max: float = 3.0
+    """Largest centre distance for a merge (Section IV-C); no value printed."""
+    max_subteams: int = 4
+    """Most parts one split may make (Section III: "one splitting action can lead to multiple sub-formations")."""
+    reference_speed: float = 1.0
+    """Speed of the global reference p_r along the team's path (m/s); it waits while every team lags by > max_lag."""
+    max_lag: float = 2.5
+    """Distance (m) between p_r and the nearest team centre beyond which p_r waits (waiting for the farthest team
+    deadlocks when a subteam ahead blocks the one behind)."""
+    scales: list[float] = field(default_factory=lambda: [1.0, 0.8])
+    """Formation scales tried when fitting ([20] optimises the scale); the spacing never drops below 2 r + 0.1 m."""
+    shape_penalty: float = 1.0
+    """Cost (m) of each step down the list of shapes (preferred first, then narrower grids); the scale costs
+    shape_penalty x (1 - scale)."""
+    switch_penalty: float = 0.5
+    """Ours: extra cost (m) of a shape or scale other than the team's last one, so that a team does not flicker
+    between two near-equal formations (each change reshuffles the slots)."""
+    gain: float = 1.5
+    """Proportional gain (1/s) towards the slot; the speed is capped at the robot's preferred (max) speed."""
+    avoid_distance: float = 0.35
+    avoid_gain: float = 2.0
+    n_dead: int = 30
+    """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
+    dp_min: float = 0.15
+    """Delta p_min (m): least progress towards its slot over n_dead steps (Section IV-D)."""
+    stuck_near: float = 0.4
+    """Steps taken within this distance (m) of the slot do not count for stuck detection (the robot is there)."""
+    faults: list[ZhuFault] = field(default_factory=list)
+
+    def check(self, key: str = "method") -> None:
+        require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)
+        require(self.behind > 0, f"{key}.behind", "must be > 0", self.behind)
+        require(self.horizon >= 0, f"{key}.horizon", "must be >= 0", self.horizon)
+        require(self.decision_period > 0 and self.control_period > 0, f"{key}.decision_period/control_period",
+                "must be > 0", (self.decision_period, self.control_period))
+        require(self.v_min is None or self.v_min > 0, f"{key}.v_min", "must be > 0 or null", self.v_min)
+        require(self.visibility_sides >= 4, f"{key}.visibility_sides", "must be >= 4", self.visibility_sides)
+        if self.v_min is not None:  # the whole visibility polygon is the largest region a robot can have
+            k = self.visibility_sides
+            largest = 0.5 * k * self.visibility**2 * math.sin(2 * math.pi / k)
+            require(self.v_min < largest, f"{key}.v_min", f"is larger than any region can be ({largest:.1f} m^2 "
+                    f"for visibility {self.visibility:g} m): the team would split at once and never merge", self.v_min)
+        require(self.p_max > 0, f"{key}.p_max", "must be > 0", self.p_max)
+        require(self.max_subteams >= 2, f"{key}.max_subteams", "must be >= 2", self.max_subteams)
+        require(self.reference_speed > 0 and self.max_lag > 0, f"{key}.reference_speed/max_lag", "must be > 0",
+                (self.reference_speed, self.max_lag))
+        require(len(self.scales) > 0 and all(0 < s <= 1 for s in self.scales), f"{key}.scales", "need values in (0, 1]",
+                self.scales)
+        require(self.n_dead >= 1 and self.dp_min > 0, f"{key}.n_dead/dp_min", "must be >= 1 and > 0",
+                (self.n_dead, self.dp_min))
+        for k, f in enumerate(self.faults):
+            require(f.kind in FAULT_KINDS, f"{key}.faults[{k}].kind", f"must be one of {list(FAULT_KINDS)}", f.kind)
+            require(f.start >= 0 and (f.end is None or f.end > f.start), f"{key}.faults[{k}]",
+                    "needs start >= 0 and end > start (or end: null)", (f.start, f.end))
+
+
+def grid_slots(m: int, across: int, spacing: float) -> np.ndarray:
+    """m robots in rows of `across` (across the direction of travel), rows one behind the other; centroid at 0."""
+    rows = [divmod(k, across) for k in range(m)]
+    pts = np.array([(-r * spacing, ((min(across, m - r * across) - 1) / 2 - c) * spacing) for r, c in rows], float)
+    return pts - pts.mean(axis=0)
+
+
+class ZhuController(Controller):
+    """Split and merge formations by convex regions, the intersection graph and consensus."""
+
+    def __init__(self, cfg: ZhuConfig) -> None:
+        super().__init__()
+        cfg.check()
+        self.cfg = cfg
+
+    def reset(self, team: TeamInfo) -> None:
+        super().reset(team)
+        cfg, spec = self.cfg, team.scenario.spec
+        for k, f in enumerate(cfg.faults):
+            require(0 <= f.robot < self.n, f"method.faults[{k}].robot", f"must be a robot index in [0, {self.n})", f.robot)
+        self.radius, self.speed = spec.robot.radius, spec.robot.max_speed
+        self.formation, self.spacing, self.angle = spec.team.formation, spec.team.spacing, spec.team.angle_deg
+        self.static = capsule_arrays(team.scenario)
+        self.mover_radius = np.array([m.radius for m in spec.moving_obstacles])
+        self.path, self.goal = team.path, team.goal
+        seg = np.linalg.norm(np.diff(self.path, axis=0), axis=1)
+        self.cum = np.concatenate([[0.0], np.cumsum(seg)])
+        self.s_ref = 0.0
+        self._ref: tuple[float, np.ndarray, float] | None = None
+        self.teams: dict[int, list[int]] = {1: list(range(self.n))}
+        self.next_id = 2
+        self._shapes: dict[int, list[np.ndarray]] = {}
+        self._hulls: dict[int, np.ndarray] = {}
+        self._v_min: dict[int, float] = {}
+        self._choice: dict[int, tuple[int, int, float] | None] = {}
+        self._held: dict[int, np.ndarray] = {}
+        self.next_control = self.next_decision = 0.0
+        self.regions: list[Region] = []
+        self.common: dict[int, Region] = {}
+        self.timings: dict[str, list[float]] = {p: [] for p in TIMED_PARTS}
+        self.stuck = StuckDetector(self.n, cfg.n_dead, cfg.dp_min, cfg.stuck_near)
+        for m in range(1, self.n + 1):  # templates, hulls and V_min of every team size, before the clock runs
+            self.v_min(m)
+            for shape in self.shapes(m):
+                self._hull(shape)
+        self._sync_subteams()
+
+    def episode_stats(self) -> dict[str, float]:
+        """Table I per episode: min / mean / max / std of each part's time (ms per control cycle, whole team)."""
+        out = {}
+        for part, samples in self.timings.items():
+            x = np.array(samples) if samples else np.full(1, np.nan)
+            for stat, f in (("min", np.min), ("mean", np.mean), ("max", np.max), ("std", np.std)):
+                out[f"time_{part}_{stat}"] = float(f(x))
+            out[f"time_{part}_count"] = float(len(samples))
+        return out
+
+    # ---- the reference, templates and regions ------------------------------------------------------------------
+
+    def reference(self) -> tuple[np.ndarray, float]:
+        """p_r (Section II: "a global reference center position p_r for the team is given") and the path heading."""
+        if self._ref is not None and self._ref[0] == self.s_ref:
+            return self._ref[1], self._ref[2]
+        s = min(self.s_ref, self.cum[-1])
+        j = int(np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.path) - 2))
+        d = self.path[j + 1] - self.path[j]
+        length = max(float(np.linalg.norm(d)), 1e-9)
+        self._ref = (self.s_ref, self.path[j] + (s - self.cum[j]) / length * d, math.atan2(d[1], d[0]))
+        return self._ref[1], self._ref[2]
+
+    def shapes(self, m: int) -> list[np.ndarray]:
+        """The template formations a team of m robots may take, preferred first (Section II: "a predefined set of
+        default formations ... known by all robots"): the scenario's formation, then grids two wide and one wide."""
+        if m not in self._shapes:
+            if m == 1:
+                self._shapes[m] = [np.zeros((1, 2))]
+            else:
+                out = [formation_slots(self.formation, m, self.spacing, self.angle)]
+                out += [grid_slots(m, w, self.spacing) for w in (2, 1) if w < m]
+                self._shapes[m] = out
+        return self._shapes[m]
+
+    def _hull(self, shape: np.ndarray) -> np.ndarray:
+        key = id(shape)  # shapes are cached per team size, so their ids are stable
+        if key not in self._hulls:
+            self._hulls[key] = hull_vertices(shape)
+        return self._hulls[key]
+
+    def v_min(self, m: int) -> float:
+        """V_min of a team of m robots (Section IV-B: "the smallest size that allows for a template formation")."""
+        if self.cfg.v_min is not None:
+            return self.cfg.v_min
+        if m not in self._v_min:
+            self._v_min[m] = footprint_area(self.shapes(m)[0], self.radius) if m > 1 else 0.0
+        return self._v_min[m]
+
+    def _obstacles(self, obs: Observation) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Static capsules plus each moving obstacle swept over [0, tau] at constant velocity (Eq. (1), Section II)."""
+        a, b, r = self.static
+        if len(self.mover_radius) == 0:
+            return a, b, r
+        m = obs.movers[: len(self.mover_radius)]
+        return (np.concatenate([a, m[:, :2]]), np.concatenate([b, m[:, :2] + self.cfg.horizon * m[:, 2:]]),
+                np.concatenate([r, self.mover_radius]))
+
+    def grow_regions(self, obs: Observation) -> list[Region]:
+        """Every robot's P_i (Algorithm 1, step 2)."""
+        a, b, r = self._obstacles(obs)
+        ref, _ = self.reference()
+        ahead = ref - obs.position
+        ahead /= np.maximum(np.linalg.norm(ahead, axis=1, keepdims=True), 1e-9)
+        # once p_r has reached the goal there is no "ahead" left: the teams regroup round it in whole discs
+        behind = math.inf if self.s_ref >= self.cum[-1] - 1e-9 else self.cfg.behind
+        return regions_from_halfplanes(grow_halfplanes(obs.position, a, b, r, self.cfg.visibility, self.radius, ahead,
+                                                       behind, self.cfg.visibility_sides))
+
+    # ---- one step ------------------------------------------------------------------------------------------------
+
+    def _active(self, kind: str, t: float) -> np.ndarray:
+        on = np.zeros(self.n, dtype=bool)
+        for f in self.cfg.faults:
+            if f.kind == kind and f.start <= t and (f.end is None or t < f.end):
+                on[f.robot] = True
+        return on
+
+    def act(self, obs: Observation) -> np.ndarray:
+        cfg, t, p = self.cfg, float(obs.time), obs.position
+        silent = self._active("comm", t)
+        comm = obs.neighbours & obs.neighbours.T  # r_C = sensing.radius; a silent robot neither sends nor receives
+        comm[silent], comm[:, silent] = False, False
+        self._detect_stuck(p)
+        if t + 1e-9 >= self.next_control:
+            self.next_control += cfg.control_period
+            self._advance_reference()
+            with self._timed("convex_regions"):
+                self.regions = self.grow_regions(obs)
+            if t + 1e-9 >= self.next_decision:
+                self.next_decision += cfg.decision_period
+                self._decide(p, comm)
+            with self._timed("formation_control"):
+                self._formation_control(p)
+        v = cfg.gain * (self._targets - p)
+        speed = np.linalg.norm(v, axis=1, keepdims=True)
+        v *= np.minimum(1.0, self.speed / np.maximum(speed, 1e-9))
+        v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)
+        v[self._active("stuck", t)] = 0.0  # the injected actuator fault
+        return v
+
+    @contextmanager
+    def _timed(self, part: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        yield
+        self.timings[part].append(1e3 * (time.perf_counter() - t0))
+
+    def _advance_reference(self) -> None:
+        ref, _ = self.reference()
+        lag = min(float(np.linalg.norm(self._positions[m].mean(axis=0) - ref)) for m in self.teams.values())
+        if lag <= self.cfg.max_lag:
+            self.s_ref = min(self.s_ref + self.cfg.reference_speed * self.cfg.control_period, float(self.cum[-1]))
+
+    def _detect_stuck(self, p: np.ndarray) -> None:
+        self._positions = p
+        flags = self.stuck.update(p, self._targets)
+        for i in np.flatnonzero(flags):
+            members = self.teams[int(self._subteams[i])]
+            if len(members) > 1:  # Section IV-D: the stuck robot leaves; the reduced formation goes on
+                members.remove(int(i))
+                self._new_team([int(i)])
+                self.emit("stuck", [int(i)], f"progress < {self.cfg.dp_min:g} m over {self.cfg.n_dead} steps")
+                self._held[int(i)] = p[i].copy()
+                self._sync_subteams()
+            self.stuck.reset(int(i))
+
+    # ---- consensus decisions (every ff seconds) -------------------------------------------------------------------
+
+    def _new_team(self, members: list[int]) -> int:
+        self.teams[self.next_id] = sorted(members)
+        self.next_id += 1
+        return self.next_id - 1
+
+    def _sync_subteams(self) -> None:
+        for k, members in self.teams.items():
+            self._subteams[members] = k
+
+    def _decide(self, p: np.ndarray, comm: np.ndarray) -> None:
+        # communication loss (Section IV-D): robots a team's flooding did not reach within d rounds are discarded
+        for k in list(self.teams):
+            parts = comm_components(comm, self.teams[k])
+            if len(parts) > 1:
+                self.teams[k] = parts[0]
+                for part in parts[1:]:
+                    self._new_team(part)
+                    self.emit("comm_loss", part, f"not heard by team {k} within its consensus rounds")
+        # split check and partition (Algorithm 1)
+        for k in list(self.teams):
+            members = self.teams[k]
+            if len(members) < 2:
+                continue
+            with self._timed("split_check"):
+                a = intersection_graph([self.regions[i] for i in members])
+                split = needs_split(a, self.v_min(len(members)))
+            if split:
+                with self._timed("graph_partition"):
+                    v_of = {m: self.v_min(m) for m in range(1, len(members) + 1)}
+                    labels = split_team(a, v_of, self.cfg.max_subteams)
+                groups = [[members[i] for i in np.flatnonzero(labels == g)] for g in range(labels.max() + 1)]
+                self.teams[k] = groups[0]
+                for g in groups[1:]:
+                    self._new_team(g)
+                self.emit("split", sorted(members), f"A_a min {a[~np.eye(len(a), dtype=bool)].min():.2f} < "
+                          f"V_min {self.v_min(len(members)):.2f}; parts {groups}")
+        self._sync_subteams()
+        with self._timed("merge_decision"):
+            self._merge(p, comm)
+        self._sync_subteams()
+        # the teams' common regions, for `stafpipe plot regions` (Zhu Fig. 4); vertices to the centimetre
+        common = intersect_all([[self.regions[i] for i in m] for m in self.teams.values()])
+        self.emit("regions", list(range(self.n)), json.dumps(
+            {str(k): np.round(r.vertices, 2).tolist() for k, r in zip(self.teams, common, strict=True)}))
+
+    def _merge(self, p: np.ndarray, comm: np.ndarray) -> None:
+        """Section IV-C and Algorithm 2."""
+        if len(self.teams) < 2:
+            return
+        ids = list(self.teams)
+        common = dict(zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True))
+        centre = {k: p[m].mean(axis=0) for k, m in self.teams.items()}
+        pairs = [(k, l) for k in ids for l in ids if k < l]
+        both_of = dict(zip(pairs, intersect_all([[common[k], common[l]] for k, l in pairs]), strict=True))
+        candidates = {}
+        # a robot dropped as stuck asks to merge only once it moves again (Section IV-D: "after the detection of the
+        # stuck fault (temporary fault), it tries to ... merge"): here, once it is 0.5 spacing from where it stopped
+        for i, at in list(self._held.items()):
+            if np.linalg.norm(p[i] - at) > 0.5 * self.spacing:
+                del self._held[i]
+        held = {int(self._subteams[i]) for i in self._held}
+        for k, l in pairs:
+            if k in held or l in held:
+                continue
+            mk, ml = self.teams[k], self.teams[l]
+            both = both_of[(k, l)]
+            in_range = bool(comm[np.ix_(mk, ml)].any())
+            if merge_candidate(centre[k], centre[l], both, self.cfg.p_max, self.v_min(len(mk) + len(ml)), in_range):
+                candidates[(k, l)] = candidates[(l, k)] = both.area
+        for k, l in mutual_merges(merge_requests(self.teams, comm, candidates)):
+            merged = sorted(self.teams.pop(k) + self.teams.pop(l))
+            self.teams[min(k, l)] = merged
+            for i in merged:
+                self.stuck.reset(i)
+            self.emit("merge", merged, f"teams {k} and {l}")
+
+    # ---- local formation control (Section III) --------------------------------------------------------------------
+
+    def _formation_control(self, p: np.ndarray) -> None:
+        ref, heading = self.reference()
+        at_end = self.s_ref >= self.cum[-1] - 1e-9
+        ids = list(self.teams)
+        self.common = dict(zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True))
+        for k, members in self.teams.items():
+            region = self.common[k]
+            if at_end and len(members) == self.n:  # the whole team is back: take the goal formation (its own slots)
+                slots = self.goal
+            else:
+                slots = self._fit(k, region, len(members), ref, heading)
+            if slots is None:  # no formation fits: each robot on its own, as [20] breaks the formation
+                alone = [fit_centres(self.regions[i], [np.zeros((1, 2))], ref)[0] for i in members]
+                slots = np.array([c if c is not None else p[i] for c, i in zip(alone, members, strict=True)])
+            perm = assign_slots(p[members], slots)
+            self._targets[members] = slots[perm]
+
+    def _fit(self, k: int, region: Region, m: int, ref: np.ndarray, heading: float) -> np.ndarray | None:
+        """The feasible template (shape, scale, position) with the least cost: distance of its centre from p_r, plus
+        shape_penalty per step away from the preferred shape and for shrinking ([20]'s formation optimisation, over a
+        finite set of candidates)."""
+        rot = rotation(heading)
+        min_scale = (2 * self.radius + 0.1) / self.spacing
+        options = [(rank, scale, scale * shape @ rot.T, scale * self._hull(shape) @ rot.T)
+                   for rank, shape in enumerate(self.shapes(m)) for scale in self.cfg.scales if m == 1 or scale >= min_scale]
+        centres = fit_centres(region, [hull for *_, hull in options], ref)
+        best, best_cost, choice = None, math.inf, None
+        previous = self._choice.get(k)
+        for (rank, scale, slots, _), centre in zip(options, centres, strict=True):
+            if centre is None:
+                continue
+            dx, dy = centre - ref
+            cost = math.hypot(dx, dy) + self.cfg.shape_penalty * (rank + 1.0 - scale)
+            cost += self.cfg.switch_penalty * (previous is not None and previous != (m, rank, scale))
+            if cost < best_cost:
+                best, best_cost, choice = slots + centre, cost, (m, rank, scale)
+        self._choice[k] = choice
+        return best

@@ -1,0 +1,206 @@
+"""Zhu et al. 2019: convex regions, the intersection graph and its spectral partition, merge conditions and consensus,
+fault detection on whole episodes, and refused settings."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from stafpipe.controllers.zhu import ZhuConfig, ZhuController, ZhuFault
+from stafpipe.controllers.zhu_decisions import (StuckDetector, comm_components, intersection_graph, merge_candidate,
+                                                merge_requests, mutual_merges, needs_split, spectral_partition,
+                                                split_team)
+from stafpipe.convex_region import fit_centres, grow_halfplanes, intersect_all, regions_from_halfplanes
+from stafpipe.episode import run_episode
+from stafpipe.errors import ConfigError
+from stafpipe.geometry import Geometry
+from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
+from stafpipe.sensing import SensingConfig
+from stafpipe.world import WorldConfig
+
+
+def _box(x0: float, y0: float, x1: float, y1: float):  # noqa: ANN202
+    return np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]), np.array([x1, -x0, y1, -y0])
+
+
+def test_regions_areas_and_intersections_have_known_values() -> None:
+    a, b = regions_from_halfplanes([_box(0, 0, 1, 1), _box(0.5, 0, 1.5, 1)])
+    assert a.area == pytest.approx(1.0) and b.area == pytest.approx(1.0)
+    (both,) = intersect_all([[a, b]])
+    assert both.area == pytest.approx(0.5)
+    (none,) = intersect_all([[a, *regions_from_halfplanes([_box(2, 2, 3, 3)])]])
+    assert none.empty and none.area == 0.0
+    # redundant half-planes are dropped: the region keeps its four edges only
+    (r,) = regions_from_halfplanes([(np.concatenate([_box(0, 0, 1, 1)[0], [[1.0, 0.0]]]),
+                                     np.concatenate([_box(0, 0, 1, 1)[1], [5.0]]))])
+    assert len(r.offsets) == 4
+
+
+def test_grown_region_stays_clear_of_an_obstacle_and_within_sight() -> None:
+    # a wall x = 2 (a capsule of radius 0.1) and a robot of radius 0.2 at the origin, visibility 6
+    (rows,) = grow_halfplanes(np.zeros((1, 2)), np.array([[2.0, -10.0]]), np.array([[2.0, 10.0]]), np.array([0.1]),
+                              6.0, 0.2)
+    (region,) = regions_from_halfplanes([rows])
+    assert region.vertices[:, 0].max() == pytest.approx(2.0 - 0.1 - 0.2)
+    assert np.linalg.norm(region.vertices, axis=1).max() <= 6.0 + 1e-9
+    assert region.contains(np.zeros((1, 2)))[0]
+    # no obstacle: the visibility octagon, 2 sqrt(2) r^2
+    (free,) = regions_from_halfplanes(grow_halfplanes(np.zeros((1, 2)), np.zeros((0, 2)), np.zeros((0, 2)),
+                                                      np.zeros(0), 6.0, 0.2))
+    assert free.area == pytest.approx(2 * math.sqrt(2) * 36.0)
+
+
+def test_formation_fits_nearest_the_target_inside_the_region() -> None:
+    (region,) = regions_from_halfplanes([_box(0, 0, 4, 2)])
+    hull = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])  # a 1 m square
+    inside, too_big = fit_centres(region, [hull, 3 * hull], np.array([2.0, 1.0]))
+    assert np.allclose(inside, [2.0, 1.0])
+    assert too_big is None
+    (clamped,) = fit_centres(region, [hull], np.array([10.0, 5.0]))
+    assert np.allclose(clamped, [3.5, 1.5])
+
+
+def test_spectral_partition_cuts_a_two_cluster_intersection_graph_between_the_clusters() -> None:
+    big, small = 30.0, 0.2
+    a = np.full((6, 6), small)
+    a[:3, :3] = a[3:, 3:] = big
+    a[[0, 3, 1], [3, 0, 4]] = a[[3, 0, 4], [0, 3, 1]] = 0.0  # some pairs do not intersect at all
+    order = np.array([4, 0, 5, 2, 1, 3])  # shuffle robots so the answer is not the index order
+    shuffled = a[np.ix_(order, order)]
+    labels = spectral_partition(shuffled, 2)
+    groups = {frozenset(order[labels == g].tolist()) for g in (0, 1)}
+    assert groups == {frozenset({0, 1, 2}), frozenset({3, 4, 5})}
+    assert needs_split(shuffled, 1.0) and not needs_split(a[:3, :3], 1.0)
+    parts = split_team(shuffled, {1: 0.0, 2: 1.0, 3: 1.0, 6: 1.0}, max_parts=4)
+    assert len(set(parts.tolist())) == 2
+
+
+def test_intersection_graph_of_regions_on_either_side_of_a_wall() -> None:
+    regions = regions_from_halfplanes([_box(0, 0, 2, 2), _box(0, 1, 2, 3), _box(3, 0, 5, 2)])
+    a = intersection_graph(regions)
+    assert np.allclose(a, [[4, 2, 0], [2, 4, 0], [0, 0, 4]])
+
+
+def test_merge_conditions_each_required() -> None:
+    (common,) = regions_from_halfplanes([_box(0, 0, 3, 3)])
+    near, far = np.array([1.0, 1.0]), np.array([5.0, 1.0])
+    assert merge_candidate(near, np.array([2.0, 2.0]), common, p_max=3.0, v_min=8.0, in_range=True)
+    assert not merge_candidate(near, far, common, p_max=3.0, v_min=8.0, in_range=True)  # centres too far
+    assert not merge_candidate(near, np.array([2.0, 2.0]), common, p_max=3.0, v_min=10.0, in_range=True)  # too small
+    assert not merge_candidate(near, np.array([2.0, 2.0]), common, p_max=3.0, v_min=8.0, in_range=False)  # silent
+
+
+def test_merge_consensus_takes_the_largest_common_region_and_needs_both_sides() -> None:
+    # teams 1 = {0, 1}, 2 = {2}, 3 = {3}; robot 0 hears team 2, robot 1 hears team 3; robots 0 and 1 talk
+    teams = {1: [0, 1], 2: [2], 3: [3]}
+    comm = np.zeros((4, 4), dtype=bool)
+    for i, j in [(0, 1), (0, 2), (1, 3)]:
+        comm[i, j] = comm[j, i] = True
+    candidates = {(1, 2): 5.0, (2, 1): 5.0, (1, 3): 9.0, (3, 1): 9.0}
+    requests = merge_requests(teams, comm, candidates)
+    assert requests == {1: 3, 2: 1, 3: 1}  # robot 0 starts with team 2, adopts robot 1's larger choice (team 3)
+    assert mutual_merges(requests) == [(1, 3)]
+
+
+def test_flooding_reaches_only_the_connected_part_of_a_team() -> None:
+    comm = np.ones((4, 4), dtype=bool)
+    comm[2, :] = comm[:, 2] = False  # robot 2 is silent
+    assert comm_components(comm, [0, 1, 2, 3]) == [[0, 1, 3], [2]]
+
+
+def test_stuck_detector_flags_only_a_robot_that_makes_no_progress() -> None:
+    det = StuckDetector(3, n_dead=5, dp_min=0.1, near=0.3)
+    target = np.array([[10.0, 0.0], [10.0, 1.0], [0.0, 2.0]])  # robot 2 sits at its target
+    p = np.array([[0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])
+    flags = []
+    for _ in range(8):
+        p = p + np.array([[0.1, 0.0], [0.0, 0.0], [0.0, 0.0]])
+        flags.append(det.update(p, target))
+    assert not np.any([f[0] for f in flags]) and not np.any([f[2] for f in flags])
+    assert flags[-1][1] and not flags[3][1]  # flagged once it has had n_dead steps of no progress
+
+
+def _open_lane(n: int = 4) -> ScenarioConfig:
+    return ScenarioConfig(name="lane", world=WorldBounds(0, -6, 40, 6), obstacles=[],
+                          team=TeamSpec(n=n, formation="square", spacing=1.0, start=(3.0, 0.0), goal=(30.0, 0.0),
+                                        heading_deg=0.0), time_limit=60.0)
+
+
+def _events(faults: list[ZhuFault]) -> tuple[list[tuple[str, list[int]]], dict[str, float]]:
+    """Run an open-lane episode with `faults`; the events it decided (without the region snapshots) and its metrics."""
+    scenario = build_scenario(_open_lane())
+    controller = ZhuController(ZhuConfig(faults=faults))
+    values = run_episode(scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(),
+                         SensingConfig(radius=3.0))
+    return [(e.kind, e.robots) for e in controller.drain_events() if e.kind != "regions"], values
+
+
+def test_a_stuck_robot_is_flagged_exactly_left_behind_and_merges_back_after_recovering() -> None:
+    kinds, values = _events([ZhuFault(robot=1, kind="stuck", start=3.0, end=8.0)])
+    assert ("stuck", [1]) in kinds
+    assert all(r == [1] for k, r in kinds if k == "stuck")  # nobody else is flagged
+    assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("stuck", [1])):]  # it rejoins after the fault
+    assert values["sr"] == 1.0
+
+
+def test_a_silent_robot_is_dropped_and_rejoins_when_it_talks_again() -> None:
+    kinds, values = _events([ZhuFault(robot=2, kind="comm", start=3.0, end=8.0)])
+    assert ("comm_loss", [2]) in kinds
+    assert all(r == [2] for k, r in kinds if k == "comm_loss")
+    assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("comm_loss", [2])):]
+    assert values["sr"] == 1.0
+
+
+def test_a_corridor_too_narrow_for_the_square_splits_the_team_and_it_merges_after() -> None:
+    # two walls leave a 1.6 m gap at x in [14, 18]: the 1 m square (1.4 m wide with its radius) fits only with 0.1 m
+    # to spare on each side, which the regions grown at the corners do not leave
+    spec = dataclasses.replace(_open_lane(), obstacles=[{"box": {"center": [16.0, 3.8], "size": [4.0, 6.0]}},
+                                                        {"box": {"center": [16.0, -3.8], "size": [4.0, 6.0]}}])
+    scenario = build_scenario(spec)
+    controller = ZhuController(ZhuConfig())
+    values = run_episode(scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(),
+                         SensingConfig(radius=3.0))
+    kinds = [e.kind for e in controller.drain_events()]
+    assert "split" in kinds and "merge" in kinds[kinds.index("split"):]
+    assert values["obstacle_collisions"] == 0
+    assert values["sr"] == 1.0
+    assert "regions" in kinds  # the common regions are logged for the snapshots plot
+
+
+def test_timings_per_part_are_reported() -> None:
+    scenario = build_scenario(_open_lane())
+    controller = ZhuController(ZhuConfig())
+    run_episode(scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(),
+                SensingConfig(radius=3.0))
+    stats = controller.episode_stats()
+    assert stats["time_convex_regions_count"] > 10 and stats["time_convex_regions_mean"] > 0
+    assert stats["time_convex_regions_min"] <= stats["time_convex_regions_mean"] <= stats["time_convex_regions_max"]
+    assert math.isnan(stats["time_graph_partition_mean"])  # no split in an open lane
+    json.dumps(stats)
+
+
+@pytest.mark.parametrize(("field", "value", "needle"), [
+    ("visibility", -1.0, "visibility"),
+    ("v_min", 500.0, "larger than any region"),
+    ("p_max", 0.0, "p_max"),
+    ("scales", [1.5], "scales"),
+    ("faults", [ZhuFault(kind="fire")], "faults[0].kind"),
+    ("faults", [ZhuFault(start=5.0, end=2.0)], "faults[0]"),
+])
+def test_bad_settings_are_refused_with_the_key(field: str, value: object, needle: str) -> None:
+    with pytest.raises(ConfigError, match=needle.replace("[", r"\[").replace("]", r"\]")):
+        ZhuController(dataclasses.replace(ZhuConfig(), **{field: value}))
+
+
+def test_a_fault_on_a_robot_that_does_not_exist_is_refused() -> None:
+    from stafpipe.controllers.base import TeamInfo
+
+    scenario = build_scenario(_open_lane())
+    controller = ZhuController(ZhuConfig(faults=[ZhuFault(robot=7)]))
+    with pytest.raises(ConfigError, match=r"faults\[0\].robot"):
+        controller.reset(TeamInfo(scenario, np.zeros((4, 2)), np.zeros((4, 2)), scenario.template(),
+                                  np.array([[3.0, 0.0], [30.0, 0.0]]), 10.0))
