@@ -62,6 +62,7 @@ class Geometry:
         if self.resolution <= 0:
             w = self.scenario.spec.world
             self.resolution = max(w.xmax - w.xmin, w.ymax - w.ymin) / 1200.0
+        self._paths: dict[tuple[tuple[float, float], tuple[float, float], float], np.ndarray] = {}
 
     @cached_property
     def grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -96,7 +97,14 @@ class Geometry:
 
     def shortest_path(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
         """Shortest path (K, 2) from start to goal keeping `clearance` from obstacles (16-neighbour grid Dijkstra,
-        then shortened along lines of sight). Raises ValueError if the goal cannot be reached."""
+        then shortened along lines of sight). Raises ValueError if the goal cannot be reached. Remembered per
+        (start, goal, clearance): every episode of an eval asks for the same legs."""
+        key = (tuple(map(float, start)), tuple(map(float, goal)), float(clearance))
+        if key not in self._paths:
+            self._paths[key] = self._shortest_path(start, goal, clearance)
+        return self._paths[key].copy()
+
+    def _shortest_path(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
         xs, ys, clear = self.grid
         free = clear >= clearance
         h, w = free.shape

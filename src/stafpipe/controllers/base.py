@@ -84,10 +84,11 @@ class Controller:
         return out
 
 
-def limit_approach(v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float) -> np.ndarray:
+def limit_approach(v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float,
+                   stop_gap: float = 0.02) -> np.ndarray:
     """Collision avoidance shared by the classical methods: towards any robot or obstacle closer than `avoid_distance`
-    (surface to surface), the approach speed is capped at avoid_gain x (gap - 0.02 m), so robots slide along and stop
-    short of contact."""
+    (surface to surface), the approach speed is capped at avoid_gain x (gap - stop_gap), so robots slide along and
+    stop short of contact."""
     v = v.copy()
     rel = obs.rel_position  # [i, j] = p_j - p_i
     dist = np.linalg.norm(rel, axis=-1)
@@ -101,7 +102,7 @@ def limit_approach(v: np.ndarray, obs: Observation, radius: float, avoid_distanc
             normals.append(o_dir[i])
             limits.append(obs.obstacle_distance[i])
         for n_vec, gap in zip(normals, limits, strict=True):
-            excess = float(v[i] @ n_vec) - avoid_gain * (gap - 0.02)
+            excess = float(v[i] @ n_vec) - avoid_gain * (gap - stop_gap)
             if excess > 0:
                 v[i] -= excess * n_vec
     return v

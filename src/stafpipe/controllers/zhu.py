@@ -94,7 +94,12 @@ class ZhuConfig:
     gain: float = 1.5
     """Proportional gain (1/s) towards the slot; the speed is capped at the robot's preferred (max) speed."""
     avoid_distance: float = 0.35
+    """Collision avoidance (controllers.base.limit_approach): surface gap (m) under which approach speed is capped."""
     avoid_gain: float = 2.0
+    """Allowed approach speed (m/s) per metre of gap left beyond stop_gap."""
+    stop_gap: float = 0.1
+    """The gap (m) at which the approach stops (L&F uses 0.02; at 1.5 m/s and 3 m/s^2 a team that reshuffles its
+    slots needs the larger margin: Scenario 2 had 19 contacts per episode with 0.02, 9 with 0.1)."""
     n_dead: int = 30
     """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
     dp_min: float = 0.15
@@ -274,7 +279,7 @@ class ZhuController(Controller):
         v = cfg.gain * (self._targets - p)
         speed = np.linalg.norm(v, axis=1, keepdims=True)
         v *= np.minimum(1.0, self.speed / np.maximum(speed, 1e-9))
-        v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)
+        v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain, cfg.stop_gap)
         v[self._active("stuck", t)] = 0.0  # the injected actuator fault
         return v
 
@@ -388,8 +393,9 @@ class ZhuController(Controller):
         at_end = self.s_ref >= self.cum[-1] - 1e-9
         ids = list(self.teams)
         self.common = dict(zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True))
+        room = self._clear_of_other_teams(p) if len(ids) > 1 else {}
         for k, members in self.teams.items():
-            region = self.common[k]
+            region = intersect_all([[self.common[k], room[k]]])[0] if k in room else self.common[k]
             if at_end and len(members) == self.n:  # the whole team is back: take the goal formation (its own slots)
                 slots = self.goal
             else:
@@ -399,6 +405,20 @@ class ZhuController(Controller):
                 slots = np.array([c if c is not None else p[i] for c, i in zip(alone, members, strict=True)])
             perm = assign_slots(p[members], slots)
             self._targets[members] = slots[perm]
+
+    def _clear_of_other_teams(self, p: np.ndarray) -> dict[int, Region]:
+        """Ours ([20] leaves robots of other teams to the local planner): for each team, the half-planes that keep its
+        target formation off the robots of the other teams and off their current targets, grown from the team's centre
+        like a region (robots as discs of 2 r + 0.1 m). Without them two subteams fit their formations on top of each
+        other round the same p_r."""
+        rows = []
+        for members in self.teams.values():
+            others = np.setdiff1d(np.arange(self.n), members)
+            discs = np.concatenate([p[others], self._targets[others]])
+            r = np.full(len(discs), self.radius + 0.1)
+            rows += grow_halfplanes(p[members].mean(axis=0)[None], discs, discs, r, self.cfg.visibility, self.radius,
+                                    sides=self.cfg.visibility_sides)
+        return dict(zip(self.teams, regions_from_halfplanes(rows), strict=True))
 
     def _fit(self, k: int, region: Region, m: int, ref: np.ndarray, heading: float) -> np.ndarray | None:
         """The feasible template (shape, scale, position) with the least cost: distance of its centre from p_r, plus
