@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -71,3 +73,17 @@ def test_bad_settings_are_refused() -> None:
         CezayirliConfig(d0=40.0).check()
     with pytest.raises(ConfigError, match="costs must be"):
         CezayirliConfig(switches=[Switch(cost="zigzag")]).check()
+
+
+def test_v_lines_up_only_behind_robots_ahead_along_its_course() -> None:
+    cfg = CezayirliConfig(d1=4.0, beta=0.1)
+    e_l = np.array([0.5, -math.sqrt(3) / 2])  # left arm of a V heading +x
+    level = np.array([[0.0, -3.0]])  # a robot level with us on the other arm: x^T e_l > 0, but not ahead
+    leader = np.array([[6.0, -2.0]])
+    x = np.concatenate([level, leader])
+    course = np.array([1.0, 0.0])
+    # the paper's rule (7) picks the nearer, level robot; with the course it picks the leader
+    assert np.allclose(cost_gradient(x, "v", cfg, e_l), (-level[0] + 4.0 * e_l)
+                       + cfg.beta * 2 * (np.linalg.norm(leader[0]) - 4.0) * (-leader[0]) / np.linalg.norm(leader[0]))
+    assert np.allclose(cost_gradient(x, "v", cfg, e_l, course), (-leader[0] + 4.0 * e_l)
+                       + cfg.beta * 2 * (3.0 - 4.0) * (-level[0]) / 3.0)

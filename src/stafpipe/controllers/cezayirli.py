@@ -64,6 +64,11 @@ class CezayirliConfig:
     """Apex angle of the V (simulation 2: 120 degrees)."""
     period: float = 0.1
     """Delta t, the sensing/steering period (s): must equal world.control_dt (one step per control period)."""
+    leader_speed: float = 1.0
+    """The leader's step as a fraction of the physical limit (Fig. 2: the limit, 1.0)."""
+    v_ahead_only: bool = True
+    """Ours: in the V, a robot lines up only behind robots that are also ahead along the V's course. Without it a
+    robot of one arm picks a robot of the other arm level with it as R_a and the two chase each other (docs)."""
     body_gap: float = 0.2
     """Ours: a step also stops this far short of touching a robot ahead (the paper's robots are points for motion)."""
     switches: list[Switch] = field(default_factory=list)
@@ -84,8 +89,11 @@ def _unit(deg: float) -> np.ndarray:
     return np.array([math.cos(math.radians(deg)), math.sin(math.radians(deg))])
 
 
-def cost_gradient(x: np.ndarray, cost: str, cfg: CezayirliConfig, e_l: np.ndarray) -> np.ndarray:
-    """grad J at the robot's own position (the origin), for sensed relative positions x (M, 2): z_k = -x_k."""
+def cost_gradient(x: np.ndarray, cost: str, cfg: CezayirliConfig, e_l: np.ndarray,
+                  course: np.ndarray | None = None) -> np.ndarray:
+    """grad J at the robot's own position (the origin), for sensed relative positions x (M, 2): z_k = -x_k.
+
+    With `course` (the V's direction), a must also lie ahead along it (ours, see docs/cezayirli.md)."""
     if len(x) == 0:
         return np.zeros(2)
     z = -x
@@ -95,7 +103,10 @@ def cost_gradient(x: np.ndarray, cost: str, cfg: CezayirliConfig, e_l: np.ndarra
         return z[k] / dist[k]
     if cost == "spread":  # (6)
         return (2 * (dist - cfg.d0) / dist) @ z
-    ahead = np.flatnonzero(x @ e_l >= 0)  # (7): a is the nearest robot with a non-negative projection on e_l
+    ok = x @ e_l >= 0  # (7): a is the nearest robot with a non-negative projection on e_l
+    if course is not None:
+        ok &= x @ course > 0
+    ahead = np.flatnonzero(ok)
     grad = np.zeros(2)
     others = np.ones(len(x), dtype=bool)
     if len(ahead):
@@ -162,11 +173,12 @@ class CezayirliController(Controller):
                 while self.waypoint + 1 < len(self.trajectory) and np.linalg.norm(self.trajectory[self.waypoint] - p[i]) < limit:
                     self.waypoint += 1
                 d = self.trajectory[self.waypoint] - p[i]
-                size = min(limit, float(np.linalg.norm(d)))
+                size = min(cfg.leader_speed * limit, float(np.linalg.norm(d)))
             else:
                 self._switch(i, p[i])
                 e_l = self._line_up(i, p)
-                d = -cost_gradient(x, self.cost[i], cfg, e_l)
+                course = _unit(self.direction[i]) if self.cost[i] == "v" and cfg.v_ahead_only else None
+                d = -cost_gradient(x, self.cost[i], cfg, e_l, course)
                 size = cfg.gamma * float(np.linalg.norm(d))  # (11)
             norm = float(np.linalg.norm(d))
             if norm < 1e-9:
