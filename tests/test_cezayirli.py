@@ -87,3 +87,26 @@ def test_v_lines_up_only_behind_robots_ahead_along_its_course() -> None:
                        + cfg.beta * 2 * (np.linalg.norm(leader[0]) - 4.0) * (-leader[0]) / np.linalg.norm(leader[0]))
     assert np.allclose(cost_gradient(x, "v", cfg, e_l, course), (-leader[0] + 4.0 * e_l)
                        + cfg.beta * 2 * (3.0 - 4.0) * (-level[0]) / 3.0)
+
+
+def test_simulation_2_forms_a_v_behind_the_leader(workdir) -> None:
+    """Simulation 2 (Fig. 5): 100 s in, five robots on each side of the leader's course, each arm a chain of about
+    d_1 spacing slanting back from the leader (the leader is robot 0, the front of the start circle)."""
+    from stafpipe.episode_log import read_episode
+    from stafpipe.launch import launch
+
+    from conftest import job_dirs
+
+    assert launch("eval", ["experiment=cezayirli_sim2", "scenario.time_limit=100", "eval.episodes=1"]) == 0
+    [run] = job_dirs(workdir / "outputs" / "eval")
+    rec = read_episode(run / "episodes" / "episode_0000.mcap")
+    rel = rec.positions[-1, 1:] - rec.positions[-1, 0]
+    for side in (1.0, -1.0):
+        arm = rel[np.sign(rel[:, 1]) == side]
+        assert len(arm) == 5
+        arm = arm[np.argsort(np.linalg.norm(arm, axis=1))]
+        gaps = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], arm]), axis=0), axis=1)
+        assert 2.5 < gaps.mean() < 5.0  # d_1 = 4
+        assert (np.diff(arm[:, 0]) < 0).all()  # each robot further back than the one before it
+        half_angle = math.degrees(math.atan2(abs(arm[-1, 1]), -arm[-1, 0]))
+        assert 35.0 < half_angle < 65.0  # a 120 deg V has 60; trailing the moving leader narrows it
