@@ -268,14 +268,18 @@ class ZhuController(Controller):
         self._detect_stuck(p)
         if t + 1e-9 >= self.next_control:
             self.next_control += cfg.control_period
-            self._advance_reference()
+            self._advance_reference(p)
             with self._timed("convex_regions"):
                 self.regions = self.grow_regions(obs)
-            if t + 1e-9 >= self.next_decision:
+            decided = t + 1e-9 >= self.next_decision
+            if decided:
                 self.next_decision += cfg.decision_period
                 self._decide(p, comm)
             with self._timed("formation_control"):
                 self._formation_control(p)
+            if decided:  # the teams' common regions, for `stafpipe plot regions` (Zhu Fig. 4), to the centimetre
+                self.emit("regions", list(range(self.n)), json.dumps(
+                    {str(k): np.round(r.vertices, 2).tolist() for k, r in self.common.items()}))
         v = cfg.gain * (self._targets - p)
         speed = np.linalg.norm(v, axis=1, keepdims=True)
         v *= np.minimum(1.0, self.speed / np.maximum(speed, 1e-9))
@@ -289,14 +293,13 @@ class ZhuController(Controller):
         yield
         self.timings[part].append(1e3 * (time.perf_counter() - t0))
 
-    def _advance_reference(self) -> None:
+    def _advance_reference(self, p: np.ndarray) -> None:
         ref, _ = self.reference()
-        lag = min(float(np.linalg.norm(self._positions[m].mean(axis=0) - ref)) for m in self.teams.values())
+        lag = min(float(np.linalg.norm(p[m].mean(axis=0) - ref)) for m in self.teams.values())
         if lag <= self.cfg.max_lag:
             self.s_ref = min(self.s_ref + self.cfg.reference_speed * self.cfg.control_period, float(self.cum[-1]))
 
     def _detect_stuck(self, p: np.ndarray) -> None:
-        self._positions = p
         flags = self.stuck.update(p, self._targets)
         for i in np.flatnonzero(flags):
             members = self.teams[int(self._subteams[i])]
@@ -350,10 +353,6 @@ class ZhuController(Controller):
         with self._timed("merge_decision"):
             self._merge(p, comm)
         self._sync_subteams()
-        # the teams' common regions, for `stafpipe plot regions` (Zhu Fig. 4); vertices to the centimetre
-        common = intersect_all([[self.regions[i] for i in m] for m in self.teams.values()])
-        self.emit("regions", list(range(self.n)), json.dumps(
-            {str(k): np.round(r.vertices, 2).tolist() for k, r in zip(self.teams, common, strict=True)}))
 
     def _merge(self, p: np.ndarray, comm: np.ndarray) -> None:
         """Section IV-C and Algorithm 2."""
