@@ -6,9 +6,9 @@ then stacking and shifting rows) and as its counter-clockwise vertices (for area
 space of robot centres: obstacles are dilated by the robot radius first (Zhu's O~_i).
 
 Growing (2D, one IRIS step with a point seed; see docs/zhu.md for why no ellipsoid iterations): start from the
-visibility disc B_i (a regular polygon inscribed in radius r_B, 8 sides by default: 90 % of the disc's area); repeatedly take the remaining obstacle nearest to the
-seed, add the half-plane tangent to its dilated surface at the point closest to the seed, and drop every obstacle that
-lies wholly beyond the new half-plane. Moving obstacles enter as capsules swept over the horizon tau (the projection of
+visibility disc B_i (a regular polygon inscribed in radius r_B, 8 sides by default: 90 % of the disc's area);
+repeatedly take the remaining obstacle nearest to the seed, add the half-plane tangent to its dilated surface at the
+point closest to the seed, and drop every obstacle that lies wholly beyond the new half-plane. Moving obstacles enter as capsules swept over the horizon tau (the projection of
 Zhu's position-time obstacle (1) onto the plane).
 
 Polygons are computed from half-planes by enumerating the crossings of every pair of lines that satisfy all
@@ -150,9 +150,9 @@ def grow_halfplanes(seeds: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, seg
                     inflate: float, ahead: np.ndarray | None = None, behind: float = math.inf, sides: int = 8
                     ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Half-planes of each robot's obstacle-free convex region P_i (Zhu Section II) around its seed (P, 2) within
-    `visibility` (r_B; the disc as a regular polygon of `sides`), avoiding capsules (seg_a, seg_b, seg_r) dilated by `inflate` (the robot radius). With unit
-    directions `ahead` (P, 2), each region also stops `behind` metres behind its seed (ours: "likely to make
-    progress", see docs/zhu.md)."""
+    `visibility` (r_B; the disc as a regular polygon of `sides`), avoiding capsules (seg_a, seg_b, seg_r) dilated by
+    `inflate` (the robot radius). With unit directions `ahead` (P, 2), each region also stops `behind` metres behind
+    its seed (ours: "likely to make progress", see docs/zhu.md)."""
     seeds = np.atleast_2d(np.asarray(seeds, float))
     disc_n, disc_c = _disc(visibility, sides)
     reach = seg_r + inflate
