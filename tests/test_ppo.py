@@ -55,7 +55,7 @@ def _train(out_dir, iterations=3, resume_from=None, on_iteration=lambda h: None)
     corridor = load_named_scenario("corridor")
     path = np.array([[4.0, 6.0], [26.0, 6.0]])
     out_dir.mkdir(parents=True, exist_ok=True)
-    return ppo.train_ppo(tc, lambda rng, k: [(corridor, path)] * k, WorldConfig(), SensingConfig(), 0.3, 4, out_dir, "h",
+    return ppo.train_ppo(tc, lambda rng, k: [(corridor, path, 2.4)] * k, WorldConfig(), SensingConfig(), 0.3, 4, out_dir, "h",
                          resume_from, on_iteration)
 
 

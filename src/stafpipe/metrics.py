@@ -107,6 +107,38 @@ def cfi_terms(traj: Trajectory, ctx: MetricContext) -> tuple[np.ndarray, np.ndar
     return np.array(diam), np.array(eps)
 
 
+def subteam_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
+    """STAF Table 2 (STAF-sub1, STAF-sub2, ...): SR, TT and CFI of each subteam of the team's first split, subteams
+    numbered by their id (STAF's plan numbers them in the order they pass). SR and TT as for the team, over the
+    subteam's robots (goal slots matched over the whole team); CFI over the samples while the team is split. Empty
+    when the team never splits."""
+    split = [k for k in range(len(traj.time)) if len(np.unique(traj.subteams[k])) > 1]
+    if not split:
+        return {}
+    labels = traj.subteams[split[0]]
+    hit = np.zeros(traj.positions.shape[1], dtype=bool)
+    for _, a, b in traj.collisions:
+        hit[[a, b] if b >= 0 else [a]] = True
+    matched = np.stack([matched_goal_distance(p, traj.team_goal) for p in traj.positions])  # (T+1, n)
+    default = math.radians(ctx.heading_deg)
+    eta = ctx.passage_width - 2.0 * ctx.cfi_margin
+    out: dict[str, float] = {}
+    for j, team in enumerate(np.unique(labels)):
+        idx = np.flatnonzero(labels == team)
+        done = np.flatnonzero((matched[:, idx] <= ctx.goal_tolerance).all(axis=1))
+        out[f"sub{j + 1}_sr"] = float(np.mean((matched[-1, idx] <= ctx.goal_tolerance) & ~hit[idx]))
+        out[f"sub{j + 1}_tt"] = float(traj.time[done[0]]) if len(done) else math.nan
+        diam, eps = [], []
+        for k in split:
+            p = traj.positions[k, idx]
+            diam.append(2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius))
+            eps.append(formation_integrity(p, ctx.formation, ctx.spacing, _heading(traj.velocities[k, idx], default),
+                                           ctx.angle_deg))
+        for sigma in CFI_SIGMAS:
+            out[f"sub{j + 1}_cfi_{sigma:g}"] = cfi(np.array(diam), np.array(eps), eta, sigma)
+    return out
+
+
 def cfi(diameter: np.ndarray, epsilon: np.ndarray, eta: float, sigma: float, w: float = CFI_WEIGHT) -> float:
     """CFI at threshold sigma, averaged over samples and subteams.
 
@@ -161,4 +193,5 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     }
     for sigma in CFI_SIGMAS:
         out[f"cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
+    out.update(subteam_metrics(traj, ctx))
     return out

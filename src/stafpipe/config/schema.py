@@ -116,7 +116,7 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity", "regions", "timing")
+PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity", "regions", "timing", "table")
 FORMATS = ("png", "pdf", "svg")
 
 
@@ -129,9 +129,12 @@ class PlotConfig:
     ablate run: its example partitions, and the ARI curve of the noise study), `training` (a train-ppo or train-high
     run: its learning curves), `connectivity` (an eval run: links and lambda2 over time, Cezayirli Fig. 4), `regions`
     (an eval run of method=zhu: snapshots of common regions, target formations and robots, Zhu Fig. 4) or `timing`
-    (an eval run of method=zhu: the computation-time table, Zhu Table I, as timing.md and timing.tex)."""
+    (an eval run of method=zhu: the computation-time table, Zhu Table I, as timing.md and timing.tex) or `table` (eval
+    runs, `run_dir` and/or `run_dirs`: STAF Table 1 and Table 2, ours beside the paper's, as table.md/.csv)."""
     run_dir: str = ""
     """The run directory to draw from."""
+    run_dirs: list[str] = field(default_factory=list)
+    """`table`: more eval run directories whose episodes join the table."""
     max_episodes: int = 4
     """Draw at most this many episodes, in episode order (0: all)."""
     times: list[float] = field(default_factory=list)
@@ -141,7 +144,8 @@ class PlotConfig:
 
     def check(self, key: str = "plot") -> None:
         require(self.kind in PLOT_KINDS, f"{key}.kind", f"must be one of {list(PLOT_KINDS)}", self.kind)
-        require(bool(self.run_dir), f"{key}.run_dir", "is required: the run directory to draw from", self.run_dir)
+        require(bool(self.run_dir) or bool(self.run_dirs), f"{key}.run_dir", "is required: the run directory to draw from",
+                self.run_dir)
         require(self.max_episodes >= 0, f"{key}.max_episodes", "must be >= 0", self.max_episodes)
         for fmt in self.formats:
             require(fmt in FORMATS, f"{key}.formats", f"entries must be in {list(FORMATS)}", fmt)

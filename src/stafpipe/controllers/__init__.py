@@ -14,6 +14,7 @@ METHODS: dict[str, tuple[str, str]] = {
     "cezayirli": ("stafpipe.controllers.cezayirli:CezayirliConfig", "stafpipe.controllers.cezayirli:CezayirliController"),
     "zhu": ("stafpipe.controllers.zhu:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
+    "staf": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),
 }
 
 __all__ = ["METHODS", "Controller", "Event", "TeamInfo", "make_controller", "method_config_class"]

@@ -53,3 +53,16 @@ def subteams_wanted(cfg: HighLevelConfig, kind: str, n: int, eta: float, robot_r
         return min(int(cfg.m), max(1, n - 1))
     m, _ = choose_m(kind, n, eta, robot_radius, cfg.safe_gap, min(cfg.m_max, max(1, n - 1)), angle_deg)
     return m
+
+
+def divider(checkpoint: str = ""):
+    """`divide(pos, goal, m) -> labels` with the deep graph cut of `checkpoint` (empty: the shipped one), for STAF's
+    plan (controllers/staf_plan.py)."""
+    from stafpipe.highlevel.checkpoint import load_checkpoint
+
+    model, _ = load_checkpoint(checkpoint)
+
+    def divide_team(pos: np.ndarray, goal: np.ndarray, m: int) -> np.ndarray:
+        return divide(model, [Team(np.asarray(pos, float), np.asarray(goal, float), m)])[0]
+
+    return divide_team

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from stafpipe.controllers.staf_plan import PlanConfig
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
 
@@ -24,6 +25,16 @@ class RewardConfig:
     """Each step the robot touches an obstacle."""
     contact_tolerance: float = 0.02
     """Surfaces closer than this (m) count as touching."""
+    formation: float = 0.1
+    """method=staf: weight of STAF's spring-damper term R^adp (Sec. 3) in the per-robot reward (0 for dgnn: DGNN has
+    no formation term)."""
+    adp_lambda: float = 0.6
+    """lambda of R^adp = sum -lambda |d_ij - p_ij| - (1 - lambda) q_ij (STAF Sec. 3; 0.6 in App. C)."""
+    proximity: float = 0.1
+    """method=staf: penalty per neighbour or obstacle closer than `safe_distance`, growing linearly to this at contact
+    (STAF Sec. 3: "a penalty when a robot comes too close to nearby obstacles or other robots")."""
+    safe_distance: float = 0.15
+    """Surface gap (m) below which the proximity penalty starts."""
 
 
 @dataclass
@@ -43,6 +54,11 @@ class PolicyConfig:
     release: float = 4.0
     """guide=path: within this distance of the path's end the target becomes the robot's own goal (m)."""
     init_log_std: float = -0.5
+    prior_gain: float = 0.0
+    """method=staf: 0 = a_i = psi(f_i) as printed; > 0 adds a proportional step towards the target (gain x target
+    vector, at most unit length) to psi's output, which then learns a residual (docs/staf.md)."""
+    message: str = "relu"
+    """method=staf: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu` (learning/staf_net.py)."""
 
 
 @dataclass
@@ -51,7 +67,8 @@ class TrainPPOConfig:
     `episode_steps` steps in each, so an iteration boundary is an exact resume point."""
 
     method: str = "dgnn"
-    """The policy to train (dgnn; STAF's intermediate + low level come with the STAF issue)."""
+    """The policy to train: `dgnn` (the baseline) or `staf` (STAF's intermediate + low level, on the targets of STAF's
+    plan with the high level fixed: one round of App. B.1's alternation)."""
     iterations: int = 100
     """Training iterations (about 10 min on 2 cores with the defaults; DGNN solves the corridor in about 60)."""
     worlds: int = 16
@@ -63,6 +80,8 @@ class TrainPPOConfig:
     formations: list[str] = field(default_factory=lambda: ["circle", "wedge", "line"])
     """Curriculum: ... and one of these team formations (STAF Table 1's three); empty: the scenario's own (or the
     `formation` group's)."""
+    team_sizes: list[int] = field(default_factory=list)
+    """Curriculum: ... and each of these team sizes (one size per iteration: a batch shares n); empty: the scenario's."""
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip: float = 0.2
@@ -83,14 +102,19 @@ class TrainPPOConfig:
     threads: int = 2
     reward: RewardConfig = field(default_factory=RewardConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
+    plan: PlanConfig = field(default_factory=PlanConfig)
+    """method=staf: the execution plan (subteams, sequencing, regroup) the policy is trained on; `method=staf` must
+    use the same settings."""
 
     def check(self, key: str = "train_ppo") -> None:
-        require(self.method in ("dgnn",), f"{key}.method", "must be dgnn", self.method)
+        require(self.method in ("dgnn", "staf"), f"{key}.method", "must be dgnn or staf", self.method)
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
         for kind in self.formations:
             require(kind in FORMATION_TYPES, f"{key}.formations", f"entries must be in {list(FORMATION_TYPES)}", kind)
+        for n in self.team_sizes:
+            require(n >= 2, f"{key}.team_sizes", "entries must be >= 2", n)
         require(len(self.scenarios) > 0, f"{key}.scenarios", "must name at least one scenario", self.scenarios)
         require(0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1, f"{key}.gamma/gae_lambda", "must be in (0, 1]",
                 (self.gamma, self.gae_lambda))
@@ -99,5 +123,9 @@ class TrainPPOConfig:
         require(self.worlds * self.episode_steps >= self.minibatches, f"{key}.minibatches",
                 "must not exceed worlds x episode_steps", self.minibatches)
         require(self.policy.guide in ("goal", "path"), f"{key}.policy.guide", "must be goal or path", self.policy.guide)
+        require(self.policy.message in ("linear", "relu"), f"{key}.policy.message", "must be linear or relu",
+                self.policy.message)
+        require(0 <= self.reward.adp_lambda <= 1, f"{key}.reward.adp_lambda", "must be in [0, 1]", self.reward.adp_lambda)
+        self.plan.check(f"{key}.plan")
         require(self.policy.hidden >= 1 and self.policy.message_layers >= 0, f"{key}.policy", "hidden >= 1, "
                 "message_layers >= 0", (self.policy.hidden, self.policy.message_layers))

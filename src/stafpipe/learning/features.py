@@ -63,3 +63,53 @@ def _clip_obstacle(obs: Observation, c: np.ndarray, s: np.ndarray, radius: float
     v = obs.obstacle
     length = np.linalg.norm(v, axis=-1, keepdims=True)
     return _rotate(v * np.minimum(1.0, radius / np.maximum(length, 1e-9)), c, s)
+
+
+STAF_OWN, STAF_EDGE = 6, 9
+
+
+def staf_features(obs: Observation, target: np.ndarray, same: np.ndarray, goal_clip: float,
+                  sensing_radius: float) -> Features:
+    """STAF's robot states s (Sec. 3, Problem Definition: position, goal, velocity, closest obstacle), in robot i's
+    frame. Own (.., n, 6): s_i = [t_i - p_i (clipped), q_i, c_i] (its position is the frame's origin); edge
+    (.., n, n, 9): s_j - s_i = [p_j - p_i, t_j - t_i, q_j - q_i, c_j - c_i, same_ij - 1], where t is the robot's target
+    from the plan (its subteam slot, later its goal) and same_ij says whether j is in i's subteam. z_j - z_i of the
+    intermediate GNN is W^z applied to this difference (staf_net.py)."""
+    c, s = np.cos(obs.heading), np.sin(obs.heading)
+    to_target = target - obs.position
+    dist = np.linalg.norm(to_target, axis=-1, keepdims=True)
+    clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
+    length = np.linalg.norm(obs.obstacle, axis=-1, keepdims=True)
+    obstacle = obs.obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))  # seen at most at the radius
+    own = np.concatenate([_rotate(clipped, c, s), _rotate(obs.velocity, c, s), _rotate(obstacle, c, s)], axis=-1)
+    cc, ss = c[..., :, None], s[..., :, None]
+    pair = lambda v: v[..., None, :, :] - v[..., :, None, :]  # noqa: E731  [i, j] = v_j - v_i
+    diff = np.concatenate([_rotate(obs.rel_position, cc, ss), _rotate(pair(target), cc, ss),
+                           _rotate(obs.rel_velocity, cc, ss), _rotate(pair(obstacle), cc, ss),
+                           (same.astype(np.float32) - 1.0)[..., None]], axis=-1)
+    mask = obs.neighbours
+    return Features(own.astype(np.float32), np.where(mask[..., None], diff, 0.0).astype(np.float32), mask)
+
+
+def staf_pairs(position: np.ndarray, velocity: np.ndarray, heading: np.ndarray, obstacle: np.ndarray,
+               target: np.ndarray, labels: np.ndarray, goal_clip: float, sensing_radius: float,
+               radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`staf_features` of one world as an edge list (large teams): own (n, 6), receiver (E,), diff (E, 9) for every
+    ordered pair within `radius` (a k-d tree finds them; perfect sensing)."""
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(position).query_pairs(radius, output_type="ndarray")
+    i = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    c, s = np.cos(heading), np.sin(heading)
+    to_target = target - position
+    dist = np.linalg.norm(to_target, axis=-1, keepdims=True)
+    clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
+    length = np.linalg.norm(obstacle, axis=-1, keepdims=True)
+    obstacle = obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))
+    own = np.concatenate([_rotate(clipped, c, s), _rotate(velocity, c, s), _rotate(obstacle, c, s)], axis=-1)
+    ci, si = c[i], s[i]
+    diff = np.concatenate([_rotate(position[j] - position[i], ci, si), _rotate(target[j] - target[i], ci, si),
+                           _rotate(velocity[j] - velocity[i], ci, si), _rotate(obstacle[j] - obstacle[i], ci, si),
+                           (labels[j] == labels[i]).astype(float)[:, None] - 1.0], axis=-1)
+    return own.astype(np.float32), i, diff.astype(np.float32)

@@ -19,7 +19,8 @@ import torch
 from tqdm import tqdm
 
 from stafpipe.learning.config import TrainPPOConfig
-from stafpipe.learning.dgnn import DGNNPolicy
+from stafpipe.controllers.staf_plan import StafPlan
+from stafpipe.learning.checkpoint import build_policy
 from stafpipe.learning.rollout import Rollout, collect, gae
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import SensingConfig
@@ -31,7 +32,7 @@ STATE_FILE = "ppo_state.pt"
 EVAL_SEED = 10_000_019  # evaluation episodes use seeds EVAL_SEED + world, never a training draw
 
 
-def update(policy: DGNNPolicy, opt: torch.optim.Optimizer, ro: Rollout, adv: torch.Tensor, ret: torch.Tensor,
+def update(policy: torch.nn.Module, opt: torch.optim.Optimizer, ro: Rollout, adv: torch.Tensor, ret: torch.Tensor,
            tc: TrainPPOConfig, gen: torch.Generator) -> dict[str, float]:
     """`tc.epochs` passes of minibatch updates over world-steps (a sample keeps its world's n robots together)."""
     t, b = ro.rewards.shape[:2]
@@ -70,14 +71,31 @@ def update(policy: DGNNPolicy, opt: torch.optim.Optimizer, ro: Rollout, adv: tor
     return {k: v / count for k, v in out.items()}
 
 
-def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[tuple[Scenario, np.ndarray]]],
+Drawn = tuple[Scenario, np.ndarray, float]
+"""A world's scenario, its team-centre shortest path and its narrowest passage width."""
+
+
+def make_plans(tc: TrainPPOConfig, drawn: list[Drawn], worlds: Worlds, divide: Callable | None) -> list[StafPlan] | None:
+    """method=staf: a fresh STAF plan per world (after `worlds.reset`, which sets the goals); None for dgnn."""
+    if divide is None:
+        return None
+    return [StafPlan(tc.plan, sc, sc.template(), worlds.goal[w], path, eta, divide)
+            for w, (sc, path, eta) in enumerate(drawn)]
+
+
+def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[Drawn]],
               world_cfg: WorldConfig, sensing: SensingConfig, tolerance: float, seed: int, out_dir: Path,
               config_hash: str, resume_from: Path | None, on_iteration: Callable[[list[dict[str, float]]], None]
-              ) -> tuple[DGNNPolicy, list[dict[str, float]]]:
+              ) -> tuple[torch.nn.Module, list[dict[str, float]]]:
     """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state."""
     torch.set_num_threads(tc.threads)
     torch.manual_seed(seed)
-    policy = DGNNPolicy(tc.policy)
+    policy = build_policy(tc.method, tc.policy)
+    divide = None
+    if tc.method == "staf":  # App. B.1: the high level is trained first and fixed while PPO trains phi and psi
+        from stafpipe.highlevel.infer import divider
+
+        divide = divider(tc.plan.high_checkpoint)
     opt = torch.optim.Adam(policy.parameters(), lr=tc.lr, eps=1e-5)
     gen = torch.Generator().manual_seed(seed)
     history: list[dict[str, float]] = []
@@ -94,10 +112,11 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
     for it in bar:
         began = time.perf_counter()
         rng = np.random.default_rng([seed, it])
-        drawn = draw_scenarios(rng, tc.worlds)  # (scenario, its team-centre shortest path) per world
-        worlds = Worlds([s for s, _ in drawn], sensing, world_cfg)
+        drawn = draw_scenarios(rng, tc.worlds)  # (scenario, its team-centre shortest path, eta) per world
+        worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
         obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, tc.worlds)])
-        ro, stats = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [p for _, p in drawn])
+        ro, stats = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [d[1] for d in drawn],
+                            plans=make_plans(tc, drawn, worlds, divide))
         collected = time.perf_counter()
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
         losses = update(policy, opt, ro, adv, ret, tc, gen)
@@ -108,9 +127,10 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
                "charts/fps": samples / (done - began), "charts/rollout_fps": samples / (collected - began),
                "charts/update_seconds": done - collected, "charts/log_std": float(policy.log_std.detach().mean())}
         if tc.eval_every and ((it + 1) % tc.eval_every == 0 or it + 1 == tc.iterations):
-            worlds = Worlds([s for s, _ in drawn], sensing, world_cfg)  # same scenarios, fixed evaluation seeds
+            worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)  # same scenarios, fixed evaluation seeds
             obs = worlds.reset([EVAL_SEED + w for w in range(tc.worlds)])
-            _, ev = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [p for _, p in drawn], deterministic=True)
+            _, ev = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [d[1] for d in drawn],
+                            deterministic=True, plans=make_plans(tc, drawn, worlds, divide))
             row.update({f"eval/{k}": v for k, v in ev.items()})
         history.append(row)
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")

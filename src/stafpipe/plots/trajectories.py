@@ -42,14 +42,20 @@ def draw_map(ax, scenario: Scenario) -> None:  # noqa: ANN001 (a matplotlib Axes
 
 
 def trajectory_figure(rec: EpisodeRecord, title: str = "") -> Figure:
-    """One episode: map, robot paths coloured by subteam over time, starts, goals, moving obstacles."""
+    """One episode: map, robot paths coloured by subteam over time, starts, goals, moving obstacles. When the team
+    split, one more panel per subteam of its first split with each of its robots' paths in its own colour (STAF Fig. 4,
+    second and third subfigures)."""
     scenario = scenario_from_yaml(rec.scenario_yaml)
     w = scenario.spec.world
     width = 8.0
-    fig = Figure(figsize=(width, max(2.5, width * (w.ymax - w.ymin) / (w.xmax - w.xmin)) + 0.6))
-    ax = fig.add_subplot()
-    draw_map(ax, scenario)
     pos, sub = rec.positions, rec.subteams  # (T, n, 2), (T, n)
+    split = [k for k in range(len(sub)) if len(np.unique(sub[k])) > 1]
+    teams = [np.flatnonzero(sub[split[0]] == j) for j in np.unique(sub[split[0]])] if split else []
+    height = max(2.5, width * (w.ymax - w.ymin) / (w.xmax - w.xmin)) + 0.6
+    fig = Figure(figsize=(width, height * (1 + len(teams))))
+    axes = fig.subplots(1 + len(teams), 1, squeeze=False)[:, 0]
+    ax = axes[0]
+    draw_map(ax, scenario)
     for i in range(pos.shape[1]):
         segments = np.stack([pos[:-1, i], pos[1:, i]], axis=1)  # (T-1, 2, 2)
         colours = [SUBTEAM_COLOURS[int(s) % len(SUBTEAM_COLOURS)] for s in sub[:-1, i]]
@@ -64,6 +70,12 @@ def trajectory_figure(rec: EpisodeRecord, title: str = "") -> Figure:
     ax.legend(loc="upper left", fontsize=7, ncols=2, framealpha=0.8)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
+    for j, (panel, idx) in enumerate(zip(axes[1:], teams, strict=True)):
+        draw_map(panel, scenario)
+        for k, i in enumerate(idx):
+            panel.plot(pos[:, i, 0], pos[:, i, 1], color=f"C{k % 10}", lw=1.0, label=f"robot {i}")
+        panel.set_title(f"subteam {j}: robots {', '.join(str(i) for i in idx)}", fontsize=8)
+        panel.legend(loc="upper left", fontsize=6, ncols=3, framealpha=0.8)
     metrics = rec.metrics or {}
     summary = ", ".join(f"{k} {metrics[k]:.2f}" for k in ("sr", "tt", "cfi_0.1") if k in metrics)
     ax.set_title(title or f"{rec.method} on {scenario.spec.name}, seed {rec.seed}" + (f" ({summary})" if summary else ""),

@@ -73,6 +73,32 @@ def _timing_tables(run_dir: Path) -> dict[str, str]:
     return {"timing.md": f"{caption}\n\n{markdown_timing(table)}", "timing.tex": latex_table(table, caption)}
 
 
+def _staf_tables(pc: PlotConfig) -> dict[str, str]:
+    """STAF Table 1 (and Table 2 where teams split) from the results of eval runs, ours beside the paper's."""
+    from stafpipe.plots.staf_tables import markdown, subteam_tables, summary_table
+
+    frames = []
+    for d in [pc.run_dir, *pc.run_dirs] if pc.run_dir else list(pc.run_dirs):
+        path = Path(d) / "results.parquet"
+        if not path.is_file():
+            raise StafpipeError(f"plot.run_dirs: {d} holds no results.parquet (is it an eval run?)")
+        try:
+            frames.append(pd.read_parquet(path))
+        except Exception as exc:  # pyarrow raises several kinds for a damaged file
+            raise StafpipeError(f"plot.run_dirs: {path} is not a readable table ({type(exc).__name__})") from None
+    results = pd.concat(frames, ignore_index=True)
+    table = summary_table(results)
+    text = markdown(table, "Table 1: team")
+    subs = subteam_tables(results)
+    if len(subs):
+        text += "\n" + markdown(subs, "Table 2: subteams (STAF-sub#: SR, TT and CFI of each subteam)", paper=False)
+    out = {"table.md": text, "table.csv": table.to_csv(index=False)}
+    if len(subs):
+        out["table2.csv"] = subs.to_csv(index=False)
+    print(text)
+    return out
+
+
 def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     """The partitions of an ablate run (and its ARI curve for the noise study), from its tables."""
     from stafpipe.plots.partitions import ari_figure, partition_figure
@@ -113,12 +139,13 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
     pc: PlotConfig = OmegaConf.to_object(cfg.plot)  # type: ignore[assignment]
     pc.check()
-    run_dir = Path(pc.run_dir)
-    if not run_dir.is_dir():
-        raise StafpipeError(f"plot.run_dir: no such directory: {run_dir}")
+    run_dir = Path(pc.run_dir or pc.run_dirs[0])
+    for d in [run_dir, *map(Path, pc.run_dirs)]:
+        if not d.is_dir():
+            raise StafpipeError(f"plot.run_dir: no such directory: {d}")
     outputs: list[Path] = []
-    if pc.kind == "timing":
-        tables = _timing_tables(run_dir)  # read and checked before anything is written
+    if pc.kind in ("timing", "table"):
+        tables = _timing_tables(run_dir) if pc.kind == "timing" else _staf_tables(pc)  # all read before any write
         for name, text in tables.items():
             outputs.append(atomic_write(out_dir / name, lambda tmp, text=text: tmp.write_text(text)))
         print("\n".join(str(p) for p in outputs))

@@ -45,9 +45,17 @@ def resume_state(out_dir: Path, digest: str) -> Path | None:
     return None
 
 
-def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
-    from stafpipe.episode import team_path
+def _path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
+    """The team centre's shortest path and the narrowest passage on the way (as an eval episode computes them)."""
+    from stafpipe.episode import episode_context
     from stafpipe.geometry import Geometry
+    from stafpipe.sensing import SensingConfig
+
+    ctx, path = episode_context(scenario, Geometry(scenario), SensingConfig(), 0.3, 0.0)
+    return path, ctx.passage_width
+
+
+def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.launch import config_hash
     from stafpipe.learning.checkpoint import save_policy
     from stafpipe.learning.ppo import STATE_FILE, train_ppo
@@ -65,16 +73,19 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     if tc.formations:  # every scenario with every formation of the curriculum
         pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
                 for s in pool for kind in tc.formations]
-    sizes = {s.spec.team.n for s in pool}
-    if len(sizes) > 1:
-        raise StafpipeError(f"train_ppo.scenarios: all need the same team size (batched worlds), got {sorted(sizes)}")
+    if tc.team_sizes:
+        pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, n=n)))
+                for s in pool for n in tc.team_sizes]
     if any(s.spec.robot != pool[0].spec.robot for s in pool):
         raise StafpipeError("train_ppo.scenarios: all need the same robot (set the `robot` group to make them equal)")
+    drawn = [(s, *_path_and_width(s)) for s in pool]
+    sizes = sorted({s.spec.team.n for s in pool})
 
-    paths = [team_path(s, Geometry(s)) for s in pool]
-
-    def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray]]:
-        return [(pool[int(k)], paths[int(k)]) for k in rng.integers(len(pool), size=count)]
+    def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray, float]]:
+        # one team size per iteration (a batch of worlds shares n); scenarios of that size drawn uniformly
+        n = sizes[int(rng.integers(len(sizes)))] if len(sizes) > 1 else sizes[0]
+        same = [d for d in drawn if d[0].spec.team.n == n]
+        return [same[int(k)] for k in rng.integers(len(same), size=count)]
 
     plain = copy.deepcopy(cfg)
     plain.train_ppo.resume = False  # the same run, resumed or not, has one hash

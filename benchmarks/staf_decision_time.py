@@ -1,0 +1,105 @@
+"""Decision time of STAF for one control step (plan + deep graph cut when it splits + intermediate GNN + policy).
+
+Usage: python benchmarks/staf_decision_time.py [--repeats 30]
+Targets (STAF issue): 10 robots <= 1 ms per step, 1,000 robots <= 50 ms. One torch thread, the shipped policy and
+deep graph cut. 10 robots: `method=staf`'s own act() on the corridor (dense features from the harness' observation),
+timed per step over a whole episode; the split step (which runs the cut) is reported apart. 1,000 robots: a 40 x 25
+grid of robots (1 m spacing) heading through a 1 km corridor, edge-list features (k-d tree within 2 m) and the
+edge-list forward pass; sensing (the harness' observation) is not part of the decision and is excluded.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import statistics
+import time
+
+import numpy as np
+import torch
+
+from stafpipe.controllers.staf import StafController, StafMethodConfig
+from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
+from stafpipe.episode import episode_context
+from stafpipe.geometry import Geometry
+from stafpipe.highlevel.infer import divider
+from stafpipe.learning.checkpoint import load_policy
+from stafpipe.learning.features import staf_pairs
+from stafpipe.scenario import build_scenario
+from stafpipe.sensing import SensingConfig
+from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.world import Worlds
+
+
+def ten_robots() -> tuple[float, float, float]:
+    """(median ms per step, max ms per step, ms of the split step) over one corridor episode."""
+    sc = load_named_scenario("corridor")
+    geometry = Geometry(sc)
+    ctx, path = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
+    ctrl = StafController(StafMethodConfig())
+    worlds = Worlds([sc], SensingConfig())
+    obs = worlds.reset([0]).world(0)
+    from stafpipe.controllers.base import TeamInfo
+
+    ctrl.reset(TeamInfo(sc, obs.position.copy(), worlds.goal[0].copy(), sc.template(), path, ctx.passage_width))
+    times, split_ms = [], float("nan")
+    for _ in range(400):
+        start = time.perf_counter()
+        action = ctrl.act(obs)
+        elapsed = 1000 * (time.perf_counter() - start)
+        events = [e.kind for e in ctrl.drain_events()]
+        if "split" in events:
+            split_ms = elapsed
+        else:
+            times.append(elapsed)
+        obs = worlds.step(action[None])[0].world(0)
+    return statistics.median(times), max(times), split_ms
+
+
+def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
+    """(plan ms, features ms, network ms, edges) for 1,000 robots."""
+    base = load_named_scenario("corridor")
+    spec = dataclasses.replace(base.spec, world=dataclasses.replace(base.spec.world, xmin=-50, xmax=1050, ymin=-50,
+                                                                    ymax=60), obstacles=[],
+                               team=dataclasses.replace(base.spec.team, formation="square", n=1000, start=[0.0, 6.0],
+                                                        goal=[1000.0, 6.0]))
+    sc = build_scenario(spec)
+    policy, _ = load_policy("", "staf")
+    template = sc.template()
+    pos = template + [0.0, 6.0]
+    goal = template + [1000.0, 6.0]
+    plan = StafPlan(PlanConfig(), sc, template, goal, np.array([[0.0, 6.0], [1000.0, 6.0]]), 50.0, divider())
+    vel = np.zeros_like(pos)
+    heading = np.zeros(len(pos))
+    obstacle = np.full_like(pos, 10.0)
+    plan_ms, feat_ms, net_ms, edges = [], [], [], 0
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        target = plan.step(pos, 0.1)
+        t1 = time.perf_counter()
+        own, receiver, diff = staf_pairs(pos, vel, heading, obstacle, target, plan.labels, policy.cfg.goal_clip, 2.0, 2.0)
+        t2 = time.perf_counter()
+        with torch.no_grad():
+            policy.act_sparse(torch.from_numpy(own), torch.from_numpy(receiver), torch.from_numpy(diff))
+        t3 = time.perf_counter()
+        plan_ms.append(1000 * (t1 - t0)), feat_ms.append(1000 * (t2 - t1)), net_ms.append(1000 * (t3 - t2))
+        edges = len(receiver)
+    return statistics.median(plan_ms), statistics.median(feat_ms), statistics.median(net_ms), edges
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=30)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    median, worst, split = ten_robots()
+    plan, feat, net, edges = thousand_robots(args.repeats)
+    print("| team | per step (median) | worst step | split step (cut) | target |")
+    print("|---|---|---|---|---|")
+    print(f"| 10 robots, corridor, method=staf act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
+    print(f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "
+          f"{plan + feat + net:.1f} ms | - | - | <= 50 ms |")
+
+
+if __name__ == "__main__":
+    main()

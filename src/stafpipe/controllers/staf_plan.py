@@ -1,0 +1,252 @@
+"""STAF's execution plan (STAF 000_f89c49495043d27c.txt, Sec. 3 and App. B.2): where every robot should be now.
+
+The team travels as one formation along its planned path (TeamInfo.path). When a passage ahead is too narrow for the
+whole team, the high level (deep graph cut, `highlevel/`) divides it into m subteams (m=auto: the smallest m whose
+subteams fit, STAF Sec. 7). Each subteam takes the team's formation type with its own robots, its spacing shrunk where
+the path is narrow (the "adaptation within the same type", Sec. 3), and the subteams pass the narrow part one after
+another in the order of their progress. Once every robot has passed into space large enough for the full team, every
+robot's target becomes its own goal slot (Sec. 3, low level: "the goal position of each individual robot is updated to
+align with the full team's goal"): the regroup.
+
+The plan gives targets (slots), subteam labels and the expected pair distances d_ij of R^adp; the learned low level
+(`learning/staf_net.py`) drives the robots. The plan is plain numpy and cheap; the same code runs in PPO training and
+in `method=staf`, so the policy is trained on exactly the targets it is executed with. Decisions: docs/staf.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from stafpipe.formations import assign_slots, formation_slots
+from stafpipe.geometry import obstacle_distance
+
+
+@dataclass
+class PlanConfig:
+    """Execution settings of STAF's plan (part of `method=staf` and of `train_ppo.staf`)."""
+
+    m: str = "auto"
+    """Subteams: `auto` (smallest m whose subteams fit the narrowest passage, STAF Sec. 7) or a fixed number."""
+    safe_gap: float = 0.3
+    """Gap (m) between robot surfaces assumed when testing whether a subteam fits (as `high.safe_gap`)."""
+    min_gap: float = 0.2
+    """Smallest gap (m) between neighbouring robots' surfaces a shrunk formation may have."""
+    margin: float = 0.15
+    """Clearance (m) kept between a formation's outer robots and the walls."""
+    speed: float = 0.8
+    """Speed (m/s) of a subteam's anchor along the path (a fraction of max speed leaves room to catch up)."""
+    max_lead: float = 0.8
+    """The anchor waits when it is this far (m) ahead of its subteam's mean progress."""
+    follow_gap: float = 0.6
+    """Free space (m) between a subteam and the one ahead of it along the path."""
+    split_distance: float = 5.0
+    """The team splits when its progress is this close (m) to the first narrow part (at once if already closer)."""
+    high_checkpoint: str = ""
+    """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
+
+    def check(self, key: str) -> None:
+        from stafpipe.errors import require
+
+        require(self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4",
+                self.m)
+        for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance"):
+            require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
+        require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
+
+
+class PathFrame:
+    """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections."""
+
+    def __init__(self, path: np.ndarray) -> None:
+        path = np.asarray(path, float)
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
+        self.path = path[keep] if keep.sum() >= 2 else np.stack([path[0], path[0] + [1e-6, 0.0]])
+        seg = np.diff(self.path, axis=0)
+        self.seg_len = np.linalg.norm(seg, axis=1)
+        self.unit = seg / self.seg_len[:, None]
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
+        self.length = float(self.cum[-1])
+
+    def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Points (.., 2) and headings (..) at arc lengths s (clipped to the path)."""
+        s = np.clip(np.asarray(s, float), 0.0, self.length)
+        k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg_len) - 1)
+        point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
+        return point, np.arctan2(self.unit[k, 1], self.unit[k, 0])
+
+    def progress(self, points: np.ndarray) -> np.ndarray:
+        """Arc length (P,) of each point's projection on the path."""
+        t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
+        t = np.clip(t, 0.0, self.seg_len)
+        proj = self.path[None, :-1] + t[..., None] * self.unit[None]
+        k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
+        return self.cum[k] + t[np.arange(len(points)), k]
+
+
+def _extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
+    """(depth along the heading, width across it) of formation-frame slots, bodies included."""
+    if len(slots) < 2:
+        return 2 * radius, 2 * radius
+    return float(np.ptp(slots[:, 0])) + 2 * radius, float(np.ptp(slots[:, 1])) + 2 * radius
+
+
+def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
+    """Slots of a k-robot formation at spacing 1 (a single robot: the origin)."""
+    return np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
+
+
+def lateral_clearance(points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0,
+                      step: float = 0.05) -> np.ndarray:
+    """(P,) free distance from each path point to the nearest obstacle straight across the path (the smaller of the
+    left and right sides, up to `reach`): the half-width a formation centred on the path may use. Distance to
+    obstacles ahead or behind does not count (a wall behind the goal does not make the goal area narrow)."""
+    if not scenario.capsules and not scenario.polygons:
+        return np.full(len(points), reach)
+    normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+    offsets = np.arange(0.0, reach + step, step)
+    out = np.full(len(points), reach)
+    for side in (1.0, -1.0):
+        rays = points[:, None] + side * offsets[None, :, None] * normal[:, None]
+        blocked = obstacle_distance(rays.reshape(-1, 2), scenario).reshape(len(points), len(offsets)) <= 0.0
+        first = np.where(blocked.any(axis=1), offsets[blocked.argmax(axis=1)], reach)
+        out = np.minimum(out, first)
+    return out
+
+
+class StafPlan:
+    """The plan of one episode: call `reset` with the team, then `step` once per control step."""
+
+    def __init__(self, cfg: PlanConfig, scenario, template: np.ndarray, goal: np.ndarray, path: np.ndarray,
+                 passage_width: float, divide) -> None:
+        """`divide(pos, goal, m) -> labels` is the high level (so tests and training can pass any partitioner)."""
+        spec = scenario.spec
+        self.cfg, self.goal, self.divide = cfg, np.asarray(goal, float), divide
+        self.kind, self.angle = spec.team.formation, spec.team.angle_deg
+        self.spacing, self.radius = spec.team.spacing, spec.robot.radius
+        self.n = len(goal)
+        self.frame = PathFrame(path)
+        # free space across the path every 0.1 m: where the full team fits, and how far subteams must shrink
+        self.ds = 0.1
+        points, heading = self.frame.at(np.arange(0.0, self.frame.length + self.ds, self.ds))
+        self.clear = lateral_clearance(points, heading, scenario)
+        self.full_slots = np.asarray(template, float)
+        _, full_width = _extent(self.full_slots, self.radius)
+        narrow = 2 * (self.clear - cfg.margin) < full_width
+        self.narrow_start = float(np.argmax(narrow) * self.ds) if narrow.any() else math.inf
+        self.narrow_end = float((len(narrow) - 1 - np.argmax(narrow[::-1])) * self.ds) if narrow.any() else -math.inf
+        self.m_wanted = self._m_wanted(passage_width) if narrow.any() else 1
+        self.reset()
+
+    def _m_wanted(self, eta: float) -> int:
+        from stafpipe.highlevel.partition import choose_m
+
+        if self.cfg.m != "auto":
+            return min(int(self.cfg.m), max(1, self.n - 1))
+        return choose_m(self.kind, self.n, eta, self.radius, self.cfg.safe_gap, min(4, max(1, self.n - 1)),
+                        self.angle)[0]
+
+    def reset(self) -> None:
+        self.labels = np.zeros(self.n, dtype=int)
+        self.order: list[np.ndarray] = [np.arange(self.n)]  # robots of each subteam, leading subteam first
+        self.slots = [self.full_slots / self.spacing]  # unit-spacing slots, row k for order[0][k]
+        self.anchor = np.full(1, -1.0)  # set from the team's progress at the first step
+        self.split_done = False
+        self.regrouped = False
+        self.events: list[tuple[str, list[int], str]] = []
+        self.targets = self.goal.copy()
+        self.expected = np.zeros((self.n, self.n))
+        self.same = np.ones((self.n, self.n), dtype=bool)
+
+    # -- the plan ---------------------------------------------------------------------------------------------
+    def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
+        """Targets (n, 2) for robots at `pos` (n, 2) after one control step of `dt` seconds."""
+        if self.regrouped:
+            return self.targets
+        progress = self.frame.progress(pos)
+        if self.anchor[0] < 0:
+            self.anchor[0] = progress.mean()
+        if not self.split_done and progress.mean() >= self.narrow_start - self.cfg.split_distance:
+            self._split(pos, progress)
+        if self.split_done and (progress.min() > self.narrow_end + self.radius or self.anchor[0] >= self.frame.length):
+            self._regroup()
+            return self.targets
+        self._advance(progress, dt)
+        if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
+            self._regroup()
+            return self.targets
+        self._place()
+        return self.targets
+
+    def _split(self, pos: np.ndarray, progress: np.ndarray) -> None:
+        self.split_done = True
+        if self.m_wanted <= 1:
+            return
+        labels = np.asarray(self.divide(pos, self.goal, self.m_wanted), dtype=int)
+        teams = [np.flatnonzero(labels == j) for j in np.unique(labels)]
+        teams.sort(key=lambda idx: -progress[idx].mean())  # the most advanced subteam passes first
+        self.order, self.slots, anchors = [], [], []
+        for idx in teams:  # a column along the path: the front subteam where the team's front is, the others behind
+            unit = unit_slots(self.kind, len(idx), self.angle)
+            depth = _extent(unit * self.spacing, self.radius)[0]
+            a = progress.max() - depth / 2 if not anchors else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
+            point, heading = self.frame.at(a)
+            c, s = math.cos(heading), math.sin(heading)
+            perm = assign_slots(pos[idx], unit * self.spacing @ np.array([[c, s], [-s, c]]) + point)
+            self.order.append(idx)
+            self.slots.append(unit[perm])  # robot idx[k] takes slot perm[k]
+            anchors.append(a)
+            last_depth = depth
+        self.labels = np.zeros(self.n, dtype=int)
+        for j, idx in enumerate(self.order):
+            self.labels[idx] = j
+        self.anchor = np.array(anchors)
+        self.same = self.labels[:, None] == self.labels[None, :]
+        self.events.append(("split", list(range(self.n)),
+                            f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
+
+    def _regroup(self) -> None:
+        self.regrouped = True
+        self.labels = np.zeros(self.n, dtype=int)
+        self.same = np.ones((self.n, self.n), dtype=bool)
+        self.targets = self.goal.copy()
+        self.expected = np.linalg.norm(self.goal[:, None] - self.goal[None], axis=-1)
+        if len(self.order) > 1:
+            self.events.append(("regroup", list(range(self.n)), f"m={len(self.order)}"))
+
+    def _spacing(self, j: int, s: float) -> float:
+        """Spacing of subteam j around arc length s: the team's, shrunk to fit the clearance ahead and behind."""
+        depth, width = _extent(self.slots[j] * self.spacing, self.radius)
+        lo, hi = int(max(0.0, s - depth) / self.ds), int((s + depth + 1.0) / self.ds) + 1
+        clear = float(self.clear[lo:hi].min()) if hi > lo and lo < len(self.clear) else math.inf
+        unit_width = width - 2 * self.radius
+        if unit_width <= 1e-9 or not math.isfinite(clear):
+            return self.spacing
+        fit = (2 * (clear - self.cfg.margin) - 2 * self.radius) * self.spacing / unit_width
+        return float(np.clip(fit, 2 * self.radius + self.cfg.min_gap, self.spacing))
+
+    def _advance(self, progress: np.ndarray, dt: float) -> None:
+        cap = self.frame.length
+        for j, idx in enumerate(self.order):
+            s = self.anchor[j] + self.cfg.speed * dt
+            s = min(s, progress[idx].mean() + self.cfg.max_lead)
+            if j > 0:  # behind the subteam ahead, with room for both formations' depths
+                ahead_depth = _extent(self.slots[j - 1] * self._spacing(j - 1, self.anchor[j - 1]), self.radius)[0]
+                own_depth = _extent(self.slots[j] * self.spacing, self.radius)[0]
+                s = min(s, self.anchor[j - 1] - (ahead_depth + own_depth) / 2 - self.cfg.follow_gap)
+            self.anchor[j] = min(max(self.anchor[j], s), cap)
+
+    def _place(self) -> None:
+        for j, idx in enumerate(self.order):
+            spacing = self._spacing(j, self.anchor[j]) if self.split_done else self.spacing
+            point, heading = self.frame.at(self.anchor[j])
+            c, s = math.cos(heading), math.sin(heading)
+            slots = self.slots[j] * spacing
+            self.targets[idx] = slots @ np.array([[c, s], [-s, c]]) + point
+            self.expected[np.ix_(idx, idx)] = np.linalg.norm(slots[:, None] - slots[None], axis=-1)
+
+    def drain_events(self) -> list[tuple[str, list[int], str]]:
+        out, self.events = self.events, []
+        return out

@@ -1,0 +1,78 @@
+"""STAF's intermediate and low levels (000_f89c49495043d27c.txt, Sec. 3; App. C), one policy shared by all robots.
+
+Intermediate level phi: z_i = W^z s_i, f_i = W^f z_i + sum_{j in N(i)} W^f (z_j - z_i) (Sec. 3), W^z 6 x 64 -> here
+9 x 64 on the robot-frame state of features.staf_features (the own state has 6 entries, as App. C's 6 x 64; the
+neighbours' difference adds the relative position, the target offset and the subteam flag), W^f 64 x 64 (App. C). Low
+level psi: two linear layers with a ReLU, f_i -> a_i = [v_x, v_y] (Sec. 3), the mean of a Gaussian policy for PPO.
+
+`message=linear` is phi as printed: the whole policy is then a one-hidden-layer network of s_i and sum_j (s_j - s_i),
+which cannot tell one close neighbour from several far ones. `message=relu` (default) passes each neighbour's
+W^f (z_j - z_i) + b through a ReLU before the sum, so a close robot can be told from the rest: docs/staf.md compares
+the two.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from stafpipe.learning.config import PolicyConfig
+from stafpipe.learning.features import STAF_EDGE, STAF_OWN
+
+
+class StafPolicy(nn.Module):
+    """phi (W^z, W^f) + psi, and a critic head (own embedding and the team's mean: a centralized critic)."""
+
+    def __init__(self, cfg: PolicyConfig):
+        super().__init__()
+        h = cfg.hidden
+        self.cfg = cfg
+        self.w_z = nn.Linear(STAF_EDGE, h, bias=False)  # z = W^z s; own state's entries are a slice of s (below)
+        self.b_z = nn.Parameter(torch.zeros(h))  # the own state's constant part (its origin and same_ii = 1)
+        self.w_f = nn.Linear(h, h, bias=False)
+        self.b_msg = nn.Parameter(torch.zeros(h))  # threshold of the ReLU message (message=relu only)
+        self.psi = nn.Sequential(nn.Linear(h, h), nn.ReLU(), nn.Linear(h, 2))
+        self.critic = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, 1))
+        self.log_std = nn.Parameter(torch.full((2,), cfg.init_log_std))
+        if cfg.prior_gain > 0:  # a residual starts at zero: the untrained policy is the proportional step itself
+            nn.init.zeros_(self.psi[2].weight)
+            nn.init.zeros_(self.psi[2].bias)
+
+    def embed(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """f (.., n, hidden): own (.., n, 6), edge (.., n, n, 9), mask (.., n, n)."""
+        # s_i in its own frame is [0, 0, own, 1]: p_i - p_i = 0, same_ii = 1; W^z s_i = W^z[:, 2:8] own + W^z[:, 8] + b
+        z = own @ self.w_z.weight[:, 2:8].T + self.w_z.weight[:, 8] + self.b_z
+        dz = self.w_z(edge)  # W^z (s_j - s_i) = z_j - z_i (linear, so the bias cancels)
+        msg = self.w_f(dz)
+        if self.cfg.message == "relu":
+            msg = torch.relu(msg + self.b_msg)
+        return self.w_f(z) + (msg * mask[..., None].float()).sum(-2)
+
+    def embed_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
+        """`embed` on an edge list, for large teams: own (n, 6), receiver (E,) = i of each pair, diff (E, 9) = s_j - s_i."""
+        z = own @ self.w_z.weight[:, 2:8].T + self.w_z.weight[:, 8] + self.b_z
+        msg = self.w_f(self.w_z(diff))
+        if self.cfg.message == "relu":
+            msg = torch.relu(msg + self.b_msg)
+        return self.w_f(z).index_add(0, receiver, msg)
+
+    def act_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
+        """Action means (n, 2) from an edge list (no critic: execution only)."""
+        mean = self.psi(self.embed_sparse(own, receiver, diff))
+        if self.cfg.prior_gain > 0:
+            step = self.cfg.prior_gain * own[..., :2]
+            mean = mean + step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
+        return mean
+
+    def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Action mean (.., n, 2) and value (.., n)."""
+        f = self.embed(own, edge, mask)
+        team = f.mean(dim=-2, keepdim=True).expand_as(f)
+        mean = self.psi(f)
+        if self.cfg.prior_gain > 0:  # residual on a proportional step to the target (docs/staf.md, decision 5)
+            step = self.cfg.prior_gain * own[..., :2]
+            mean = mean + step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
+        return mean, self.critic(torch.cat([f, team], dim=-1))[..., 0]
+
+    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
+        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))

@@ -1,0 +1,95 @@
+"""STAF's result tables from eval runs, ours beside the paper's (000_f89c49495043d27c.txt, Table 1; Table 2 is only
+described in the text: "a 100% success rate across all formations" for every subteam).
+
+One row per (method, formation, team size, drive, scenario) group of episodes: mean and 95 % confidence half-width
+(Student t) of SR, TT, CFI at sigma 0.5 / 0.1 / 0.01, TT over its lower bound, collisions per episode, and the share of
+episodes in which every robot succeeded.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+# STAF Table 1 (Gazebo, 10 robots, corridor): SR %, TT s, CFI % at sigma < 0.5, 0.1, 0.01
+PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = {
+    ("dgnn", "circle"): (100.00, 68.70, 60.41, 58.91, 58.91),
+    ("dgnn", "wedge"): (100.00, 82.70, 47.85, 42.33, 41.92),
+    ("dgnn", "line"): (100.00, 72.61, 27.90, 20.16, 20.16),
+    ("lf", "circle"): (40.00, 27.40, 67.28, 64.54, 62.69),
+    ("lf", "wedge"): (70.00, 26.50, 69.70, 62.11, 59.47),
+    ("lf", "line"): (60.00, 30.10, 63.76, 55.89, 55.89),
+    ("staf", "circle"): (100.00, 102.10, 87.79, 80.12, 80.12),
+    ("staf", "wedge"): (100.00, 69.30, 80.52, 80.51, 80.50),
+    ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
+}
+METRICS = ("sr", "tt", "cfi_0.5", "cfi_0.1", "cfi_0.01", "tt_ratio", "collisions")
+GROUP = ["method", "formation", "n", "drive", "scenario"]
+
+
+def _mean_ci(values: pd.Series) -> tuple[float, float]:
+    v = values.dropna().to_numpy(float)
+    if len(v) == 0:
+        return math.nan, math.nan
+    if len(v) == 1:
+        return float(v[0]), math.nan
+    return float(v.mean()), float(stats.t.ppf(0.975, len(v) - 1) * v.std(ddof=1) / math.sqrt(len(v)))
+
+
+def summary_table(results: pd.DataFrame, prefix: str = "") -> pd.DataFrame:
+    """Mean and CI of each metric per group; `prefix` = "sub1_" etc. reads a subteam's columns (Table 2)."""
+    rows = []
+    for key, group in results.groupby([c for c in GROUP if c in results], sort=False):
+        row = dict(zip([c for c in GROUP if c in results], key if isinstance(key, tuple) else (key,), strict=True))
+        row["episodes"] = len(group)
+        row["all_succeeded"] = float((group["sr"] >= 1.0).mean())
+        for metric in METRICS:
+            column = f"{prefix}{metric}" if metric in ("sr", "tt") or metric.startswith("cfi") else metric
+            if column in group:
+                row[metric], row[f"{metric}_ci95"] = _mean_ci(group[column])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _cell(mean: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
+    if not np.isfinite(mean):
+        return "-"
+    text = f"{mean * scale:.{digits}f}"
+    return text + (f" ± {ci * scale:.{digits}f}" if np.isfinite(ci) else "")
+
+
+def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
+    """The table as Markdown: ours (mean ± 95 % CI; SR and CFI in %) and the paper's value in brackets."""
+    head = ["method", "formation", "n", "drive", "episodes", "SR %", "TT s", "CFI 0.5 %", "CFI 0.1 %", "CFI 0.01 %",
+            "TT / bound", "collisions", "all robots ok"]
+    lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for _, r in table.iterrows():
+        ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and r.get("n") == 10 else None
+        cells = [_cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
+                 _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan))]
+        cells += [_cell(r.get(f"cfi_{s}", math.nan), r.get(f"cfi_{s}_ci95", math.nan), 100) for s in ("0.5", "0.1", "0.01")]
+        if ref is not None:
+            cells = [f"{c} [{p:.1f}]" for c, p in zip(cells, ref, strict=True)]
+        cells += [_cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
+                  _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
+                  f"{100 * r['all_succeeded']:.0f} %"]
+        lines.append("| " + " | ".join([str(r["method"]), str(r["formation"]), str(r.get("n", "")),
+                                        str(r.get("drive", "")), str(r["episodes"]), *cells]) + " |")
+    if paper:
+        lines += ["", "[brackets]: STAF Table 1 (Gazebo, 10 trials per cell). Ours: mean ± 95 % CI over the episodes."]
+    return "\n".join(lines) + "\n"
+
+
+def subteam_tables(results: pd.DataFrame) -> pd.DataFrame:
+    """Table 2: one row per (group, subteam) of the runs whose team split."""
+    parts = []
+    for j in range(1, 5):
+        if f"sub{j}_sr" not in results:
+            break
+        t = summary_table(results[results[f"sub{j}_sr"].notna()], prefix=f"sub{j}_")
+        t["method"] = t["method"].astype(str) + f"-sub{j}"
+        parts.append(t)
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()

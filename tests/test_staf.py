@@ -1,0 +1,161 @@
+"""STAF's full hierarchy: the plan (split, one-after-another, regroup), the intermediate GNN as printed, R^adp, the
+robot-frame features, the STAF tables, and the shipped policy on the corridor."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
+from stafpipe.episode import episode_context
+from stafpipe.formations import place
+from stafpipe.geometry import Geometry, obstacle_distance
+from stafpipe.highlevel.infer import divider
+from stafpipe.learning.config import PolicyConfig, RewardConfig
+from stafpipe.learning.features import STAF_EDGE, STAF_OWN, staf_features
+from stafpipe.learning.rollout import staf_penalties
+from stafpipe.learning.staf_net import StafPolicy
+from stafpipe.scenario import build_scenario
+from stafpipe.sensing import SensingConfig
+from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.world import Worlds
+
+
+def _scenario(name: str, kind: str, n: int | None = None):
+    sc = load_named_scenario(name)
+    team = dataclasses.replace(sc.spec.team, formation=kind, n=n or sc.spec.team.n)
+    return build_scenario(dataclasses.replace(sc.spec, team=team))
+
+
+def _ideal_run(sc, divide, steps: int = 1500):
+    """Robots that move straight to their plan targets at the robot's max speed: the plan alone, no policy."""
+    ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
+    t, v = sc.spec.team, sc.spec.robot.max_speed
+    pos, goal = place(sc.template(), t.start, math.radians(t.heading_deg)), place(sc.template(), t.goal, math.radians(t.heading_deg))
+    plan = StafPlan(PlanConfig(), sc, sc.template(), goal, path, ctx.passage_width, divide)
+    log = {"events": [], "min_gap": np.inf, "min_wall": np.inf, "labels": [], "progress": []}
+    for k in range(steps):
+        target = plan.step(pos, 0.1)
+        log["labels"].append(plan.labels.copy())
+        log["progress"].append(plan.frame.progress(pos))
+        log["events"] += [e[0] for e in plan.drain_events()]
+        d = target - pos
+        pos = pos + d * np.minimum(1.0, 0.1 * v / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9))
+        gaps = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.eye(len(pos)) * 9
+        log["min_gap"] = min(log["min_gap"], gaps.min() - 2 * sc.spec.robot.radius)
+        log["min_wall"] = min(log["min_wall"], (obstacle_distance(pos, sc) - sc.spec.robot.radius).min())
+        if np.linalg.norm(pos - goal, axis=1).max() < 0.05:
+            return k * 0.1, log, ctx
+    return math.inf, log, ctx
+
+
+@pytest.fixture(scope="module")
+def divide():
+    return divider()
+
+
+@pytest.mark.parametrize("kind, m", [("circle", 2), ("wedge", 3), ("line", 4)])
+def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m) -> None:
+    tt, log, ctx = _ideal_run(_scenario("corridor", kind), divide)
+    assert log["events"] == ["split", "regroup"]
+    assert tt < 1.4 * ctx.travel_time_lower_bound  # the plan itself costs little time
+    assert log["min_gap"] > 0.1 and log["min_wall"] > 0.1  # targets keep robots apart and off the walls
+    split = next(k for k, lab in enumerate(log["labels"]) if lab.max() > 0)
+    labels = log["labels"][split]
+    assert labels.max() + 1 == m
+    # inside the corridor (x 12..18 -> arc 8..14) subteam j + 1 is behind subteam j: one after another
+    for k in range(split, len(log["labels"])):
+        if log["labels"][k].max() == 0:
+            break
+        means = [log["progress"][k][labels == j].mean() for j in range(m)]
+        if not 8.0 <= np.mean(means) <= 14.0:
+            continue
+        assert all(a > b for a, b in zip(means[:-1], means[1:], strict=True))
+
+
+def test_plan_does_not_split_where_the_team_fits(divide) -> None:
+    sc = load_named_scenario("corridor")
+    open_world = build_scenario(dataclasses.replace(sc.spec, obstacles=[]))
+    tt, log, ctx = _ideal_run(open_world, divide)
+    assert log["events"] == [] and max(lab.max() for lab in log["labels"]) == 0
+    assert tt < 1.3 * ctx.travel_time_lower_bound  # the anchor moves at plan.speed = 0.8 of max speed
+
+
+def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
+    torch.manual_seed(0)
+    net = StafPolicy(PolicyConfig(hidden=8, message="linear"))
+    n = 3
+    own = torch.randn(n, STAF_OWN)
+    edge = torch.randn(n, n, STAF_EDGE)
+    mask = torch.tensor([[0, 1, 1], [1, 0, 0], [1, 0, 0]], dtype=torch.bool)
+    f = net.embed(own, edge, mask)
+    wz, wf = net.w_z.weight, net.w_f.weight
+    for i in range(n):  # z_i = W^z s_i with s_i = [0, 0, own_i, 1]; z_j - z_i = W^z (s_j - s_i)
+        s_i = torch.cat([torch.zeros(2), own[i], torch.ones(1)])
+        z_i = wz @ s_i + net.b_z
+        expect = wf @ z_i + sum(wf @ (wz @ edge[i, j]) for j in range(n) if mask[i, j])
+        assert torch.allclose(f[i], expect, atol=1e-5)
+
+
+def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:
+    sc = _scenario("corridor", "circle", 4)
+    worlds = Worlds([sc], SensingConfig(radius=3.0))
+    obs = worlds.reset([0]).world(0)
+    target = obs.position + np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.5, 0.5]])
+    same = np.array([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 0, 1, 1]], dtype=bool)
+    f = staf_features(obs, target, same, 5.0, 2.0)
+    i, j = 0, 1
+    c, s = math.cos(obs.heading[i]), math.sin(obs.heading[i])
+    rot = np.array([[c, s], [-s, c]])  # world -> robot i's frame
+    assert obs.neighbours[i, j]
+    assert np.allclose(f.edge[i, j, :2], rot @ (obs.position[j] - obs.position[i]), atol=1e-5)
+    assert np.allclose(f.edge[i, j, 2:4], rot @ (target[j] - target[i]), atol=1e-5)
+    assert f.edge[i, j, 8] == 0.0 and (f.edge[0, 2, 8] == -1.0 or not obs.neighbours[0, 2])
+    assert np.allclose(f.own[i, :2], rot @ (target[i] - obs.position[i]), atol=1e-5)
+
+
+def test_spring_damper_term_matches_a_hand_computed_case() -> None:
+    sc = _scenario("corridor", "line", 3)
+    worlds = Worlds([sc], SensingConfig())
+    obs = worlds.reset([0])
+    worlds.pos[0] = [[5.0, 6.0], [5.0, 7.5], [5.0, 9.0]]
+    worlds.vel[0] = [[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]]
+    obs = worlds.observe()
+
+    class Plan:  # robots 0 and 1 one subteam expecting 1 m apart; robot 2 alone
+        expected = np.array([[0, 1.0, 0], [1.0, 0, 0], [0, 0, 0]])
+        same = np.array([[1, 1, 0], [1, 1, 0], [0, 0, 1]], dtype=bool)
+
+    rc = RewardConfig(formation=1.0, adp_lambda=0.6, proximity=0.0)
+    got = staf_penalties(worlds, obs, [Plan()], rc)[0]
+    pair = -0.6 * abs(1.0 - 1.5) - 0.4 * 1.0  # spring |d - p| = 0.5, damper |q_0 - q_1| = 1
+    assert np.allclose(got, [pair, pair, 0.0])
+
+
+def test_subteam_metrics_and_staf_table() -> None:
+    from stafpipe.metrics import MetricContext, Trajectory, subteam_metrics
+    from stafpipe.plots.staf_tables import markdown, subteam_tables, summary_table
+
+    goal = np.array([[10.0, 0.0], [10.0, 1.0], [10.0, 2.0], [10.0, 3.0]])
+    start = goal - [10.0, 0.0]
+    pos = np.stack([start, start + [5.0, 0.0], goal - [[0, 0], [0, 0], [1.0, 0], [1.0, 0]], goal])
+    sub = np.array([[0, 0, 0, 0], [0, 0, 1, 1], [0, 0, 1, 1], [0, 0, 0, 0]])
+    traj = Trajectory(np.arange(4.0), pos, np.zeros_like(pos), sub, goal, np.full((4, 4), 5.0), [(1, 2, -1)])
+    ctx = MetricContext(0.2, "line", 1.0, 90.0, 0.0, 2.4, 10.0)
+    out = subteam_metrics(traj, ctx)
+    assert out["sub1_sr"] == 1.0 and out["sub2_sr"] == 0.5  # robot 2 touched a wall
+    assert out["sub1_tt"] == 2.0 and out["sub2_tt"] == 3.0
+    rows = [{"method": "staf", "formation": "circle", "n": 10, "drive": "holonomic", "scenario": "corridor",
+             "sr": 1.0 if k else 0.9, "tt": 30.0 + k, "cfi_0.5": 0.9, "cfi_0.1": 0.8, "cfi_0.01": 0.8,
+             "tt_ratio": 1.3, "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0} for k in range(3)]
+    table = summary_table(pd.DataFrame(rows))
+    assert table.loc[0, "episodes"] == 3 and math.isclose(table.loc[0, "sr"], 29 / 30)
+    assert math.isclose(table.loc[0, "all_succeeded"], 2 / 3)
+    text = markdown(table, "t")
+    assert "[87.8]" in text and "[102.1]" in text  # the paper's STAF circle numbers beside ours
+    assert subteam_tables(pd.DataFrame(rows)).loc[0, "method"] == "staf-sub1"
