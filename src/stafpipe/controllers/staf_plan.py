@@ -85,6 +85,12 @@ class PathFrame:
         k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
         return self.cum[k] + t[np.arange(len(points)), k]
 
+    def lateral(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (P,) of each point from the path, left positive."""
+        point, heading = self.at(self.progress(points))
+        d = points - point
+        return np.cos(heading) * d[:, 1] - np.sin(heading) * d[:, 0]
+
 
 def _extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
     """(depth along the heading, width across it) of formation-frame slots, bodies included."""
@@ -123,10 +129,12 @@ class StafPlan:
                  passage_width: float, divide) -> None:
         """`divide(pos, goal, m) -> labels` is the high level (so tests and training can pass any partitioner)."""
         spec = scenario.spec
-        self.cfg, self.goal, self.divide = cfg, np.asarray(goal, float), divide
+        self.cfg, self.goal_slots, self.divide = cfg, np.asarray(goal, float), divide
         self.kind, self.angle = spec.team.formation, spec.team.angle_deg
         self.spacing, self.radius = spec.team.spacing, spec.robot.radius
         self.n = len(goal)
+        self.goal = self.goal_slots.copy()
+        """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are alike."""
         self.frame = PathFrame(path)
         # free space across the path every 0.1 m: where the full team fits, and how far subteams must shrink
         self.ds = 0.1
@@ -155,6 +163,8 @@ class StafPlan:
         self.anchor = np.full(1, -1.0)  # set from the team's progress at the first step
         self.split_done = False
         self.regrouped = False
+        self.hold: list[np.ndarray | None] = [None]
+        self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
         self.targets = self.goal.copy()
         self.expected = np.zeros((self.n, self.n))
@@ -171,11 +181,12 @@ class StafPlan:
         if not self.split_done and progress.mean() >= self.narrow_start - self.cfg.split_distance:
             self._split(pos, progress)
         if self.split_done and (progress.min() > self.narrow_end + self.radius or self.anchor[0] >= self.frame.length):
-            self._regroup()
+            self._regroup(pos)
             return self.targets
+        self._release(progress)
         self._advance(progress, dt)
         if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
-            self._regroup()
+            self._regroup(pos)
             return self.targets
         self._place()
         return self.targets
@@ -186,12 +197,15 @@ class StafPlan:
             return
         labels = np.asarray(self.divide(pos, self.goal, self.m_wanted), dtype=int)
         teams = [np.flatnonzero(labels == j) for j in np.unique(labels)]
-        teams.sort(key=lambda idx: -progress[idx].mean())  # the most advanced subteam passes first
+        # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
+        lateral = np.abs(self.frame.lateral(pos))
+        teams.sort(key=lambda idx: -(progress[idx].mean() - lateral[idx].mean()))
         self.order, self.slots, anchors = [], [], []
-        for idx in teams:  # a column along the path: the front subteam where the team's front is, the others behind
+        last_depth = 0.0
+        for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
             unit = unit_slots(self.kind, len(idx), self.angle)
             depth = _extent(unit * self.spacing, self.radius)[0]
-            a = progress.max() - depth / 2 if not anchors else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
+            a = progress.max() + depth / 2 if not anchors else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
             point, heading = self.frame.at(a)
             c, s = math.cos(heading), math.sin(heading)
             perm = assign_slots(pos[idx], unit * self.spacing @ np.array([[c, s], [-s, c]]) + point)
@@ -203,14 +217,16 @@ class StafPlan:
         for j, idx in enumerate(self.order):
             self.labels[idx] = j
         self.anchor = np.array(anchors)
+        self.hold = [None] + [pos[idx].copy() for idx in self.order[1:]]  # later subteams wait where they are
         self.same = self.labels[:, None] == self.labels[None, :]
         self.events.append(("split", list(range(self.n)),
                             f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
 
-    def _regroup(self) -> None:
+    def _regroup(self, pos: np.ndarray) -> None:
         self.regrouped = True
         self.labels = np.zeros(self.n, dtype=int)
         self.same = np.ones((self.n, self.n), dtype=bool)
+        self.goal = self.goal_slots[assign_slots(pos, self.goal_slots)] if len(self.order) > 1 else self.goal_slots
         self.targets = self.goal.copy()
         self.expected = np.linalg.norm(self.goal[:, None] - self.goal[None], axis=-1)
         if len(self.order) > 1:
@@ -227,9 +243,19 @@ class StafPlan:
         fit = (2 * (clear - self.cfg.margin) - 2 * self.radius) * self.spacing / unit_width
         return float(np.clip(fit, 2 * self.radius + self.cfg.min_gap, self.spacing))
 
+    def _release(self, progress: np.ndarray) -> None:
+        """A waiting subteam starts once every robot of the subteam ahead is `follow_gap` ahead of all of its own."""
+        for j in range(1, len(self.order)):
+            if self.hold[j] is not None and self.hold[j - 1] is None and \
+                    progress[self.order[j - 1]].min() >= progress[self.order[j]].max() + self.cfg.follow_gap:
+                self.hold[j] = None
+                self.anchor[j] = max(self.anchor[j], float(progress[self.order[j]].mean()))
+
     def _advance(self, progress: np.ndarray, dt: float) -> None:
         cap = self.frame.length
         for j, idx in enumerate(self.order):
+            if self.hold[j] is not None:
+                continue
             s = self.anchor[j] + self.cfg.speed * dt
             s = min(s, progress[idx].mean() + self.cfg.max_lead)
             if j > 0:  # behind the subteam ahead, with room for both formations' depths
@@ -240,6 +266,10 @@ class StafPlan:
 
     def _place(self) -> None:
         for j, idx in enumerate(self.order):
+            if self.hold[j] is not None:
+                self.targets[idx] = self.hold[j]
+                self.expected[np.ix_(idx, idx)] = np.linalg.norm(self.hold[j][:, None] - self.hold[j][None], axis=-1)
+                continue
             spacing = self._spacing(j, self.anchor[j]) if self.split_done else self.spacing
             point, heading = self.frame.at(self.anchor[j])
             c, s = math.cos(heading), math.sin(heading)

@@ -103,7 +103,8 @@ def collect(policy: torch.nn.Module, worlds: Worlds, obs: Observation, tc: Train
             logprob = dist_a.log_prob(action).sum(-1)
         obs, events = worlds.step(commands(action.numpy(), worlds.heading, worlds.robot.max_speed))
         hits += sum(len(e) for e in events)
-        new_dist = np.linalg.norm(worlds.goal - worlds.pos, axis=-1)
+        goal = worlds.goal if plans is None else np.stack([p.goal for p in plans])  # STAF reassigns slots at regroup
+        new_dist = np.linalg.norm(goal - worlds.pos, axis=-1)
         now_reached = new_dist <= tolerance
         progress = dist - new_dist if plans is None else before - np.linalg.norm(target - worlds.pos, axis=-1)
         reward = rc.progress * progress + rc.goal * (now_reached & ~reached) + contact_penalties(worlds, obs, rc)

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from stafpipe.learning.config import PolicyConfig
-from stafpipe.learning.features import STAF_EDGE, STAF_OWN
+from stafpipe.learning.features import STAF_EDGE
 
 
 class StafPolicy(nn.Module):
