@@ -102,5 +102,8 @@ def test_bad_policy_checkpoint_and_settings_are_refused(workdir) -> None:
     (workdir / "junk.pt").write_bytes(b"junk")
     assert launch("eval", ["method=dgnn", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
     assert launch("train-ppo", [*TINY, "train_ppo.clip=1.5"]) == 2
-    assert launch("train-ppo", [*TINY, "train_ppo.scenarios=[corridor,zhu_corridor16]"]) == 2  # team sizes differ
+    assert launch("train-ppo", [*TINY, "train_ppo.team_sizes=[1]"]) == 2
+    assert launch("train-ppo", [*TINY, "train_ppo.method=staf", "train_ppo.plan.m=7"]) == 2
+    assert launch("eval", ["method=staf", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
+    assert launch("eval", ["method=staf", "method.plan.speed=0", "eval.episodes=1"]) == 2
     assert not job_dirs(workdir)

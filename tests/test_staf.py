@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
-from stafpipe.episode import episode_context
+from stafpipe.episode import centred_path, episode_context
 from stafpipe.formations import place
 from stafpipe.geometry import Geometry, obstacle_distance
 from stafpipe.highlevel.infer import divider
@@ -34,7 +34,9 @@ def _scenario(name: str, kind: str, n: int | None = None):
 
 def _ideal_run(sc, divide, steps: int = 1500):
     """Robots that move straight to their plan targets at the robot's max speed: the plan alone, no policy."""
-    ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
+    geometry = Geometry(sc)
+    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
+    path = centred_path(sc, geometry, ctx.passage_width)
     t, v = sc.spec.team, sc.spec.robot.max_speed
     pos, goal = place(sc.template(), t.start, math.radians(t.heading_deg)), place(sc.template(), t.goal, math.radians(t.heading_deg))
     plan = StafPlan(PlanConfig(), sc, sc.template(), goal, path, ctx.passage_width, divide)
@@ -76,6 +78,16 @@ def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m) -> N
         if not 8.0 <= np.mean(means) <= 14.0:
             continue
         assert all(a > b for a, b in zip(means[:-1], means[1:], strict=True))
+
+
+@pytest.mark.parametrize("name", ["narrowing", "multi_passage"])
+def test_plan_regroups_where_the_goal_area_is_close_to_the_narrow_part(divide, name) -> None:
+    """narrowing: the front subteam reaches the goal before the last one is out; multi_passage: two passages off
+    each other's axis. Robots still inside keep following their subteam, the others take their goal slots."""
+    sc = load_named_scenario(name)
+    tt, log, ctx = _ideal_run(sc, divide)
+    assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
+    assert log["min_wall"] > 0.05 and log["min_gap"] > 0.0
 
 
 def test_plan_does_not_split_where_the_team_fits(divide) -> None:
@@ -159,3 +171,41 @@ def test_subteam_metrics_and_staf_table() -> None:
     text = markdown(table, "t")
     assert "[87.8]" in text and "[102.1]" in text  # the paper's STAF circle numbers beside ours
     assert subteam_tables(pd.DataFrame(rows)).loc[0, "method"] == "staf-sub1"
+
+
+def test_shipped_staf_passes_the_corridor_and_logs_split_and_regroup(workdir) -> None:
+    """The shipped policy end to end (method=staf through eval): every robot at its goal slot without a collision,
+    the team split into subteams and regrouped, and the MCAP log says so."""
+    from conftest import job_dirs
+    from stafpipe.episode_log import read_episode
+    from stafpipe.launch import launch
+
+    assert launch("eval", ["method=staf", "formation=wedge", "eval.episodes=1", "seed=3"]) == 0
+    run = job_dirs(workdir)[0]
+    row = pd.read_parquet(run / "results.parquet").iloc[0]
+    assert row["sr"] == 1.0 and row["collisions"] == 0 and row["subteams_max"] == 3
+    assert row["tt_ratio"] < 1.5 and row["sub1_sr"] == 1.0
+    rec = read_episode(next((run / "episodes").glob("*.mcap")))
+    kinds = [e["kind"] for e in rec.events]
+    assert kinds.index("split") < kinds.index("regroup")
+
+
+def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir) -> None:
+    from conftest import job_dirs
+    from stafpipe.launch import launch
+
+    for method in ("staf", "lf"):
+        d = workdir / method
+        d.mkdir()
+        pd.DataFrame([{"method": method, "formation": "line", "n": 10, "drive": "holonomic", "scenario": "corridor",
+                       "sr": 1.0, "tt": 30.0, "cfi_0.5": 0.8, "cfi_0.1": 0.7, "cfi_0.01": 0.7, "tt_ratio": 1.4,
+                       "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "sub1_cfi_0.5": 0.9}] * 2
+                     ).to_parquet(d / "results.parquet")
+    (workdir / "empty").mkdir()
+    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'empty'}]"]) == 2
+    assert not job_dirs(workdir)
+    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'lf'}]"]) == 0
+    out = job_dirs(workdir)[0]
+    text = (out / "table.md").read_text()
+    assert "[91.5]" in text and "[30.1]" in text and "staf-sub1" in text  # STAF line CFI, L&F line TT, Table 2
+    assert (out / "cfi_vs_sigma.png").is_file() and len(pd.read_csv(out / "table.csv")) == 2

@@ -37,12 +37,27 @@ def _route(scenario: Scenario) -> list[tuple[float, float]]:
     return [tuple(t.start), *[tuple(p) for p in scenario.spec.reference_path], tuple(t.goal)]
 
 
-def team_path(scenario: Scenario, geometry: Geometry) -> np.ndarray:
+def team_path(scenario: Scenario, geometry: Geometry, clearance: float | None = None) -> np.ndarray:
     """The formation centre's shortest collision-free path from start to goal through the reference waypoints (K, 2),
-    keeping one robot radius from obstacles: what controllers get as TeamInfo.path."""
+    keeping `clearance` (default: one robot radius) from obstacles: with the default, what controllers get as
+    TeamInfo.path."""
     route = _route(scenario)
-    legs = [geometry.shortest_path(a, b, scenario.spec.robot.radius) for a, b in zip(route[:-1], route[1:], strict=True)]
+    keep = scenario.spec.robot.radius if clearance is None else clearance
+    legs = [geometry.shortest_path(a, b, keep) for a, b in zip(route[:-1], route[1:], strict=True)]
     return np.concatenate([legs[0], *[leg[1:] for leg in legs[1:]]])
+
+
+def centred_path(scenario: Scenario, geometry: Geometry, passage_width: float) -> np.ndarray:
+    """The centre's shortest path keeping almost half the narrowest passage from obstacles, so that it runs through the
+    middle of every passage (what STAF's plan centres its subteams on); the TeamInfo.path if that is impossible (e.g.
+    a start closer to a wall)."""
+    for clearance in (passage_width / 2 - 0.05, passage_width / 2 - 0.2, passage_width / 4):
+        if clearance > scenario.spec.robot.radius:
+            try:
+                return team_path(scenario, geometry, clearance)
+            except ValueError:
+                continue
+    return team_path(scenario, geometry)
 
 
 def episode_context(scenario: Scenario, geometry: Geometry, sensing: SensingConfig, goal_tolerance: float,

@@ -52,13 +52,25 @@ class StafController(Controller):
         self.max_speed = 1.0
         self.plan: StafPlan | None = None
         self.last_time = 0.0
+        self.paths: list[tuple[object, np.ndarray]] = []  # (scenario, its centred path), by identity
 
     def reset(self, team: TeamInfo) -> None:
         super().reset(team)
         self.max_speed = team.scenario.spec.robot.max_speed
-        self.plan = StafPlan(self.cfg.plan, team.scenario, team.template, team.goal, team.path, team.passage_width,
-                             self.divide)
+        self.plan = StafPlan(self.cfg.plan, team.scenario, team.template, team.goal, self._path(team),
+                             team.passage_width, self.divide)
         self.last_time = 0.0
+
+    def _path(self, team: TeamInfo) -> np.ndarray:
+        """The path through the middle of the passages (episode.centred_path), computed once per scenario."""
+        from stafpipe.episode import centred_path
+        from stafpipe.geometry import Geometry
+
+        for scenario, path in self.paths:
+            if scenario is team.scenario:
+                return path
+        self.paths.append((team.scenario, centred_path(team.scenario, Geometry(team.scenario), team.passage_width)))
+        return self.paths[-1][1]
 
     def act(self, obs: Observation) -> np.ndarray:
         assert self.plan is not None, "reset() first"

@@ -163,6 +163,7 @@ class StafPlan:
         self.anchor = np.full(1, -1.0)  # set from the team's progress at the first step
         self.split_done = False
         self.regrouped = False
+        self.merging = False
         self.hold: list[np.ndarray | None] = [None]
         self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
@@ -180,15 +181,24 @@ class StafPlan:
             self.anchor[0] = progress.mean()
         if not self.split_done and progress.mean() >= self.narrow_start - self.cfg.split_distance:
             self._split(pos, progress)
-        if self.split_done and (progress.min() > self.narrow_end + self.radius or self.anchor[0] >= self.frame.length):
-            self._regroup(pos)
+        passed = progress > self.narrow_end + self.radius
+        if self.split_done and not self.merging and (passed.all() or self.anchor[0] >= self.frame.length):
+            self._start_regroup(pos)
+        if self.merging and passed.all():
+            self._finish_regroup()
             return self.targets
         self._release(progress)
         self._advance(progress, dt)
         if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
-            self._regroup(pos)
+            self._finish_regroup()
             return self.targets
         self._place()
+        if self.merging:  # robots that are through take their goal slots; the others still follow their subteam
+            self.targets[passed] = self.goal[passed]
+            self.labels[passed] = 0
+            self.same = self.labels[:, None] == self.labels[None, :]
+            self.expected[np.ix_(passed, passed)] = np.linalg.norm(self.goal[passed][:, None] - self.goal[passed][None],
+                                                                   axis=-1)
         return self.targets
 
     def _split(self, pos: np.ndarray, progress: np.ndarray) -> None:
@@ -222,15 +232,20 @@ class StafPlan:
         self.events.append(("split", list(range(self.n)),
                             f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
 
-    def _regroup(self, pos: np.ndarray) -> None:
+    def _start_regroup(self, pos: np.ndarray) -> None:
+        """Every robot past the last narrow stretch (or the front subteam at the path's end: the goal area itself is
+        tight): the original formation's goal slots are reassigned to the robots (Hungarian)."""
+        self.merging = True
+        if len(self.order) > 1:
+            self.goal = self.goal_slots[assign_slots(pos, self.goal_slots)]
+            self.events.append(("regroup", list(range(self.n)), f"m={len(self.order)}"))
+
+    def _finish_regroup(self) -> None:
         self.regrouped = True
         self.labels = np.zeros(self.n, dtype=int)
         self.same = np.ones((self.n, self.n), dtype=bool)
-        self.goal = self.goal_slots[assign_slots(pos, self.goal_slots)] if len(self.order) > 1 else self.goal_slots
         self.targets = self.goal.copy()
         self.expected = np.linalg.norm(self.goal[:, None] - self.goal[None], axis=-1)
-        if len(self.order) > 1:
-            self.events.append(("regroup", list(range(self.n)), f"m={len(self.order)}"))
 
     def _spacing(self, j: int, s: float) -> float:
         """Spacing of subteam j around arc length s: the team's, shrunk to fit the clearance ahead and behind."""
@@ -258,7 +273,7 @@ class StafPlan:
                 continue
             s = self.anchor[j] + self.cfg.speed * dt
             s = min(s, progress[idx].mean() + self.cfg.max_lead)
-            if j > 0:  # behind the subteam ahead, with room for both formations' depths
+            if j > 0 and not self.merging:  # behind the subteam ahead, with room for both formations' depths
                 ahead_depth = _extent(self.slots[j - 1] * self._spacing(j - 1, self.anchor[j - 1]), self.radius)[0]
                 own_depth = _extent(self.slots[j] * self.spacing, self.radius)[0]
                 s = min(s, self.anchor[j - 1] - (ahead_depth + own_depth) / 2 - self.cfg.follow_gap)

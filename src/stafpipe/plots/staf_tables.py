@@ -93,3 +93,23 @@ def subteam_tables(results: pd.DataFrame) -> pd.DataFrame:
         t["method"] = t["method"].astype(str) + f"-sub{j}"
         parts.append(t)
     return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+
+
+def cfi_sigma_figure(table: pd.DataFrame):
+    """STAF Fig. 8(e): CFI against sigma, one line per (method, formation, team size) row of a summary table."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5.0, 3.4))
+    ax = fig.add_subplot()
+    sigmas = [0.5, 0.1, 0.01]
+    for _, r in table.iterrows():
+        means = [100 * r.get(f"cfi_{s:g}", math.nan) for s in sigmas]
+        cis = [100 * r.get(f"cfi_{s:g}_ci95", math.nan) for s in sigmas]
+        ax.errorbar(sigmas, means, yerr=np.nan_to_num(cis), marker="o", capsize=3,
+                    label=f"{r['method']} {r['formation']} n={r.get('n', '?')}")
+    ax.set_xscale("log")
+    ax.set_xlabel("sigma (m)")
+    ax.set_ylabel("CFI (%)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig

@@ -148,6 +148,11 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
         tables = _timing_tables(run_dir) if pc.kind == "timing" else _staf_tables(pc)  # all read before any write
         for name, text in tables.items():
             outputs.append(atomic_write(out_dir / name, lambda tmp, text=text: tmp.write_text(text)))
+        if pc.kind == "table":  # Fig. 8(e) beside the table
+            from stafpipe.plots.staf_tables import cfi_sigma_figure
+
+            outputs += save_figure(cfi_sigma_figure(pd.read_csv(out_dir / "table.csv")), out_dir / "cfi_vs_sigma",
+                                   pc.formats, pc.dpi)
         print("\n".join(str(p) for p in outputs))
         return outputs
     draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures,

@@ -45,14 +45,16 @@ def resume_state(out_dir: Path, digest: str) -> Path | None:
     return None
 
 
-def _path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
-    """The team centre's shortest path and the narrowest passage on the way (as an eval episode computes them)."""
-    from stafpipe.episode import episode_context
+def _path_and_width(scenario: Scenario, method: str) -> tuple[np.ndarray, float]:
+    """The team centre's shortest path (for staf: through the middle of the passages, as `method=staf` plans) and the
+    narrowest passage on the way (as an eval episode computes them)."""
+    from stafpipe.episode import centred_path, episode_context
     from stafpipe.geometry import Geometry
     from stafpipe.sensing import SensingConfig
 
-    ctx, path = episode_context(scenario, Geometry(scenario), SensingConfig(), 0.3, 0.0)
-    return path, ctx.passage_width
+    geometry = Geometry(scenario)
+    ctx, path = episode_context(scenario, geometry, SensingConfig(), 0.3, 0.0)
+    return (centred_path(scenario, geometry, ctx.passage_width) if method == "staf" else path), ctx.passage_width
 
 
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
@@ -78,7 +80,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
                 for s in pool for n in tc.team_sizes]
     if any(s.spec.robot != pool[0].spec.robot for s in pool):
         raise StafpipeError("train_ppo.scenarios: all need the same robot (set the `robot` group to make them equal)")
-    drawn = [(s, *_path_and_width(s)) for s in pool]
+    drawn = [(s, *_path_and_width(s, tc.method)) for s in pool]
     sizes = sorted({s.spec.team.n for s in pool})
 
     def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray, float]]:
