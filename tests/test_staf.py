@@ -16,6 +16,7 @@ from stafpipe.episode import centred_path, episode_context
 from stafpipe.formations import place
 from stafpipe.geometry import Geometry, obstacle_distance
 from stafpipe.highlevel.infer import divider
+from stafpipe.integrity import formation_integrity
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.features import STAF_EDGE, STAF_OWN, staf_features
 from stafpipe.learning.rollout import staf_penalties
@@ -78,6 +79,27 @@ def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m) -> N
         if not 8.0 <= np.mean(means) <= 14.0:
             continue
         assert all(a > b for a, b in zip(means[:-1], means[1:], strict=True))
+
+
+@pytest.mark.parametrize("kind", ["circle", "wedge"])
+def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
+    """At the split, the subteams behind the first wait where they are, in the formation type with their own robots
+    (targets of a perfect k-robot formation at the team's spacing, facing along the path)."""
+    sc = _scenario("corridor", kind)
+    geometry = Geometry(sc)
+    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
+    t = sc.spec.team
+    pos = place(sc.template(), t.start, math.radians(t.heading_deg))
+    goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
+    plan = StafPlan(PlanConfig(split_distance=100.0), sc, sc.template(), goal, centred_path(sc, geometry,
+                    ctx.passage_width), ctx.passage_width, divide)
+    target = plan.step(pos, 0.1)
+    assert len(plan.order) > 1
+    for idx in plan.order[1:]:
+        assert formation_integrity(target[idx], kind, t.spacing, 0.0) > 0.99
+        assert np.allclose(target[idx].mean(axis=0), pos[idx].mean(axis=0))  # in place: no robot crosses the team
+        gaps = np.linalg.norm(target[idx][:, None] - target[idx][None], axis=-1) + np.eye(len(idx)) * 9
+        assert gaps.min() == pytest.approx(t.spacing, abs=1e-6)  # at the team's spacing: there is room here
 
 
 @pytest.mark.parametrize("name", ["narrowing", "multi_passage"])

@@ -227,10 +227,21 @@ class StafPlan:
         for j, idx in enumerate(self.order):
             self.labels[idx] = j
         self.anchor = np.array(anchors)
-        self.hold = [None] + [pos[idx].copy() for idx in self.order[1:]]  # later subteams wait where they are
+        # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
+        self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
         self.same = self.labels[:, None] == self.labels[None, :]
         self.events.append(("split", list(range(self.n)),
                             f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
+
+    def _formed(self, j: int, pos: np.ndarray) -> np.ndarray:
+        """Waiting targets of subteam j: its formation at the team's spacing, centred on the subteam's centroid and
+        facing along the path there (STAF Sec. 3: each subteam keeps the formation type with its own robots)."""
+        idx = self.order[j]
+        centre = pos[idx].mean(axis=0)
+        _, heading = self.frame.at(float(self.frame.progress(centre[None])[0]))
+        c, s = math.cos(heading), math.sin(heading)
+        slots = self.slots[j] * self.spacing @ np.array([[c, s], [-s, c]])
+        return slots - slots.mean(axis=0) + centre
 
     def _start_regroup(self, pos: np.ndarray) -> None:
         """Every robot past the last narrow stretch (or the front subteam at the path's end: the goal area itself is
