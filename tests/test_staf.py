@@ -186,12 +186,15 @@ def test_subteam_metrics_and_staf_table() -> None:
     assert out["sub1_tt"] == 2.0 and out["sub2_tt"] == 3.0
     rows = [{"method": "staf", "formation": "circle", "n": 10, "drive": "holonomic", "scenario": "corridor",
              "sr": 1.0 if k else 0.9, "tt": 30.0 + k, "cfi_0.5": 0.9, "cfi_0.1": 0.8, "cfi_0.01": 0.8,
-             "tt_ratio": 1.3, "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0} for k in range(3)]
-    table = summary_table(pd.DataFrame(rows))
-    assert table.loc[0, "episodes"] == 3 and math.isclose(table.loc[0, "sr"], 29 / 30)
+             "tt_ratio": 1.3, "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "eta": 2.17, "run": 0}
+            for k in range(3)]
+    narrower = [dict(r, eta=1.8, run=1) for r in rows]  # the same cell on a corridor with a 2.0 m gap: its own row
+    table = summary_table(pd.DataFrame(rows + narrower))
+    assert len(table) == 2 and table.loc[0, "episodes"] == 3 and math.isclose(table.loc[0, "sr"], 29 / 30)
     assert math.isclose(table.loc[0, "all_succeeded"], 2 / 3)
     text = markdown(table, "t")
-    assert "[87.8]" in text and "[102.1]" in text  # the paper's STAF circle numbers beside ours
+    assert text.count("[87.8]") == 1 and "[102.1]" in text  # the paper's STAF circle numbers beside ours, not beside
+    assert "| 1.80 |" in text  # the narrower corridor's
     assert subteam_tables(pd.DataFrame(rows)).loc[0, "method"] == "staf-sub1"
 
 
@@ -221,7 +224,7 @@ def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir)
         d.mkdir()
         pd.DataFrame([{"method": method, "formation": "line", "n": 10, "drive": "holonomic", "scenario": "corridor",
                        "sr": 1.0, "tt": 30.0, "cfi_0.5": 0.8, "cfi_0.1": 0.7, "cfi_0.01": 0.7, "tt_ratio": 1.4,
-                       "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "sub1_cfi_0.5": 0.9}] * 2
+                       "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "sub1_cfi_0.5": 0.9, "eta": 2.17}] * 2
                      ).to_parquet(d / "results.parquet")
     (workdir / "empty").mkdir()
     assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'empty'}]"]) == 2

@@ -1,7 +1,8 @@
 """STAF's result tables from eval runs, ours beside the paper's (000_f89c49495043d27c.txt, Table 1; Table 2 is only
 described in the text: "a 100% success rate across all formations" for every subteam).
 
-One row per (method, formation, team size, drive, scenario) group of episodes: mean and 95 % confidence half-width
+One row per (run, method, formation, team size, drive, scenario) group of episodes (a run: one eval directory, so a
+corridor made narrower stays apart from the original): mean and 95 % confidence half-width
 (Student t) of SR, TT, CFI at sigma 0.5 / 0.1 / 0.01, TT over its lower bound, collisions per episode, and the share of
 episodes in which every robot succeeded.
 """
@@ -27,7 +28,8 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
     ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
 }
 METRICS = ("sr", "tt", "cfi_0.5", "cfi_0.1", "cfi_0.01", "tt_ratio", "collisions")
-GROUP = ["method", "formation", "n", "drive", "scenario"]
+GROUP = ["run", "method", "formation", "n", "drive", "scenario"]
+PAPER_ETA = 2.4 - 2 * 0.1  # the corridor's 2.4 m gap less the CFI margin: where the paper's numbers apply
 
 
 def _mean_ci(values: pd.Series) -> tuple[float, float]:
@@ -45,6 +47,7 @@ def summary_table(results: pd.DataFrame, prefix: str = "") -> pd.DataFrame:
     for key, group in results.groupby([c for c in GROUP if c in results], sort=False):
         row = dict(zip([c for c in GROUP if c in results], key if isinstance(key, tuple) else (key,), strict=True))
         row["episodes"] = len(group)
+        row["eta"] = float(group["eta"].mean()) if "eta" in group else math.nan
         row["all_succeeded"] = float((group["sr"] >= 1.0).mean())
         for metric in METRICS:
             column = f"{prefix}{metric}" if metric in ("sr", "tt") or metric.startswith("cfi") else metric
@@ -63,11 +66,13 @@ def _cell(mean: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
 
 def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
     """The table as Markdown: ours (mean ± 95 % CI; SR and CFI in %) and the paper's value in brackets."""
-    head = ["method", "formation", "n", "drive", "episodes", "SR %", "TT s", "CFI 0.5 %", "CFI 0.1 %", "CFI 0.01 %",
-            "TT / bound", "collisions", "all robots ok"]
+    head = ["method", "scenario", "eta m", "formation", "n", "drive", "episodes", "SR %", "TT s", "CFI 0.5 %",
+            "CFI 0.1 %", "CFI 0.01 %", "TT / bound", "collisions", "all robots ok"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in table.iterrows():
-        ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and r.get("n") == 10 else None
+        eta = r.get("eta", math.nan)
+        papers_cell = r.get("n") == 10 and r.get("scenario", "corridor") == "corridor" and abs(eta - PAPER_ETA) < 0.3
+        ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and papers_cell else None
         cells = [_cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
                  _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan))]
         cells += [_cell(r.get(f"cfi_{s}", math.nan), r.get(f"cfi_{s}_ci95", math.nan), 100) for s in ("0.5", "0.1", "0.01")]
@@ -76,8 +81,9 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         cells += [_cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
                   _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
                   f"{100 * r['all_succeeded']:.0f} %"]
-        lines.append("| " + " | ".join([str(r["method"]), str(r["formation"]), str(r.get("n", "")),
-                                        str(r.get("drive", "")), str(r["episodes"]), *cells]) + " |")
+        lines.append("| " + " | ".join([str(r["method"]), str(r.get("scenario", "")), _cell(eta, math.nan, 1, 2),
+                                        str(r["formation"]), str(r.get("n", "")), str(r.get("drive", "")),
+                                        str(r["episodes"]), *cells]) + " |")
     if paper:
         lines += ["", "[brackets]: STAF Table 1 (Gazebo, 10 trials per cell). Ours: mean ± 95 % CI over the episodes."]
     return "\n".join(lines) + "\n"

@@ -78,12 +78,12 @@ def _staf_tables(pc: PlotConfig) -> dict[str, str]:
     from stafpipe.plots.staf_tables import markdown, subteam_tables, summary_table
 
     frames = []
-    for d in [pc.run_dir, *pc.run_dirs] if pc.run_dir else list(pc.run_dirs):
+    for run, d in enumerate([pc.run_dir, *pc.run_dirs] if pc.run_dir else list(pc.run_dirs)):
         path = Path(d) / "results.parquet"
         if not path.is_file():
             raise StafpipeError(f"plot.run_dirs: {d} holds no results.parquet (is it an eval run?)")
         try:
-            frames.append(pd.read_parquet(path))
+            frames.append(pd.read_parquet(path).assign(run=run))
         except Exception as exc:  # pyarrow raises several kinds for a damaged file
             raise StafpipeError(f"plot.run_dirs: {path} is not a readable table ({type(exc).__name__})") from None
     results = pd.concat(frames, ignore_index=True)
