@@ -79,7 +79,7 @@ def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
         t1 = time.perf_counter()
         own, receiver, diff = staf_pairs(pos, vel, heading, obstacle, target, plan.labels, policy.cfg.goal_clip, 2.0, 2.0)
         t2 = time.perf_counter()
-        with torch.no_grad():
+        with torch.inference_mode():
             policy.act_sparse(torch.from_numpy(own), torch.from_numpy(receiver), torch.from_numpy(diff))
         t3 = time.perf_counter()
         plan_ms.append(1000 * (t1 - t0)), feat_ms.append(1000 * (t2 - t1)), net_ms.append(1000 * (t3 - t2))

@@ -134,6 +134,12 @@ def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
         z_i = wz @ s_i + net.b_z
         expect = wf @ z_i + sum(wf @ (wz @ edge[i, j]) for j in range(n) if mask[i, j])
         assert torch.allclose(f[i], expect, atol=1e-5)
+    # execution (no critic) and the edge list of large teams give the training forward's action means
+    full = StafPolicy(PolicyConfig(hidden=8))
+    torch.nn.init.normal_(full.psi[2].weight)  # a residual starts at zero: give psi a say
+    receiver, sender = mask.nonzero(as_tuple=True)
+    assert torch.allclose(full.act(own, edge, mask), full(own, edge, mask)[0])
+    assert torch.allclose(full.act_sparse(own, receiver, edge[receiver, sender]), full(own, edge, mask)[0], atol=1e-6)
 
 
 def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:

@@ -80,8 +80,8 @@ class StafController(Controller):
         for kind, robots, detail in self.plan.drain_events():
             self.emit(kind, robots, detail)
         f = staf_features(obs, self._targets, self.plan.same, self.policy.cfg.goal_clip, self.cfg.sensing_radius)
-        with torch.no_grad():
-            mean, _ = self.policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
+        with torch.inference_mode():  # execution: no critic, no autograd bookkeeping
+            mean = self.policy.act(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
             if not self.cfg.deterministic:
                 mean = mean + self.policy.log_std.exp() * torch.randn(mean.shape, generator=self.generator)
         return commands(mean.numpy(), obs.heading, self.max_speed)

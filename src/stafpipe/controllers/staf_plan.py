@@ -168,8 +168,6 @@ class StafPlan:
         self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
         self.targets = self.goal.copy()
-        self.expected = np.zeros((self.n, self.n))
-        self.same = np.ones((self.n, self.n), dtype=bool)
 
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
@@ -196,9 +194,6 @@ class StafPlan:
         if self.merging:  # robots that are through take their goal slots; the others still follow their subteam
             self.targets[passed] = self.goal[passed]
             self.labels[passed] = 0
-            self.same = self.labels[:, None] == self.labels[None, :]
-            self.expected[np.ix_(passed, passed)] = np.linalg.norm(self.goal[passed][:, None] - self.goal[passed][None],
-                                                                   axis=-1)
         return self.targets
 
     def _split(self, pos: np.ndarray, progress: np.ndarray) -> None:
@@ -229,7 +224,6 @@ class StafPlan:
         self.anchor = np.array(anchors)
         # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
         self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
-        self.same = self.labels[:, None] == self.labels[None, :]
         self.events.append(("split", list(range(self.n)),
                             f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
 
@@ -254,9 +248,7 @@ class StafPlan:
     def _finish_regroup(self) -> None:
         self.regrouped = True
         self.labels = np.zeros(self.n, dtype=int)
-        self.same = np.ones((self.n, self.n), dtype=bool)
         self.targets = self.goal.copy()
-        self.expected = np.linalg.norm(self.goal[:, None] - self.goal[None], axis=-1)
 
     def _spacing(self, j: int, s: float) -> float:
         """Spacing of subteam j around arc length s: the team's, shrunk to fit the clearance ahead and behind."""
@@ -294,14 +286,24 @@ class StafPlan:
         for j, idx in enumerate(self.order):
             if self.hold[j] is not None:
                 self.targets[idx] = self.hold[j]
-                self.expected[np.ix_(idx, idx)] = np.linalg.norm(self.hold[j][:, None] - self.hold[j][None], axis=-1)
                 continue
             spacing = self._spacing(j, self.anchor[j]) if self.split_done else self.spacing
             point, heading = self.frame.at(self.anchor[j])
             c, s = math.cos(heading), math.sin(heading)
             slots = self.slots[j] * spacing
             self.targets[idx] = slots @ np.array([[c, s], [-s, c]]) + point
-            self.expected[np.ix_(idx, idx)] = np.linalg.norm(slots[:, None] - slots[None], axis=-1)
+
+    @property
+    def same(self) -> np.ndarray:
+        """(n, n) True where two robots are in the same subteam (n x n: built on demand, not every step)."""
+        return self.labels[:, None] == self.labels[None, :]
+
+    @property
+    def expected(self) -> np.ndarray:
+        """(n, n) d_ij of R^adp (STAF Sec. 3): the distance between two robots' targets, i.e. between their slots in
+        their subteam's (shrunk) formation or, once through at the regroup, between their goal slots. Only pairs in the
+        same subteam are used."""
+        return np.linalg.norm(self.targets[:, None] - self.targets[None], axis=-1)
 
     def drain_events(self) -> list[tuple[str, list[int], str]]:
         out, self.events = self.events, []

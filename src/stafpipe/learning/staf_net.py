@@ -56,23 +56,26 @@ class StafPolicy(nn.Module):
             msg = torch.relu(msg + self.b_msg)
         return self.w_f(z).index_add(0, receiver, msg)
 
-    def act_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
-        """Action means (n, 2) from an edge list (no critic: execution only)."""
-        mean = self.psi(self.embed_sparse(own, receiver, diff))
-        if self.cfg.prior_gain > 0:
+    def _mean(self, f: torch.Tensor, own: torch.Tensor) -> torch.Tensor:
+        mean = self.psi(f)
+        if self.cfg.prior_gain > 0:  # residual on a proportional step to the target (docs/staf.md, decision 5)
             step = self.cfg.prior_gain * own[..., :2]
             mean = mean + step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
         return mean
+
+    def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """Action means (.., n, 2) without the critic: execution only."""
+        return self._mean(self.embed(own, edge, mask), own)
+
+    def act_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
+        """Action means (n, 2) from an edge list (no critic: execution only)."""
+        return self._mean(self.embed_sparse(own, receiver, diff), own)
 
     def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Action mean (.., n, 2) and value (.., n)."""
         f = self.embed(own, edge, mask)
         team = f.mean(dim=-2, keepdim=True).expand_as(f)
-        mean = self.psi(f)
-        if self.cfg.prior_gain > 0:  # residual on a proportional step to the target (docs/staf.md, decision 5)
-            step = self.cfg.prior_gain * own[..., :2]
-            mean = mean + step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
-        return mean, self.critic(torch.cat([f, team], dim=-1))[..., 0]
+        return self._mean(f, own), self.critic(torch.cat([f, team], dim=-1))[..., 0]
 
     def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
         return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
