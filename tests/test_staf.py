@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from omegaconf import OmegaConf
 
 from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
 from stafpipe.episode import centred_path, episode_context
@@ -21,6 +22,7 @@ from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.features import STAF_EDGE, STAF_OWN, staf_features
 from stafpipe.learning.rollout import staf_penalties
 from stafpipe.learning.staf_net import StafPolicy
+from stafpipe.paths import conf_dir
 from stafpipe.scenario import build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
@@ -192,9 +194,9 @@ def test_subteam_metrics_and_staf_table() -> None:
     assert out["sub1_tt"] == 2.0 and out["sub2_tt"] == 3.0
     rows = [{"method": "staf", "formation": "circle", "n": 10, "drive": "holonomic", "scenario": "corridor",
              "sr": 1.0 if k else 0.9, "tt": 30.0 + k, "cfi_0.5": 0.9, "cfi_0.1": 0.8, "cfi_0.01": 0.8,
-             "tt_ratio": 1.3, "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "eta": 2.17, "run": 0}
-            for k in range(3)]
-    narrower = [dict(r, eta=1.8, run=1) for r in rows]  # the same cell on a corridor with a 2.0 m gap: its own row
+             "tt_ratio": 1.3, "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "eta": 2.17, "run": 0,
+             "paper_cell": True} for k in range(3)]
+    narrower = [dict(r, eta=1.8, run=1, paper_cell=False) for r in rows]  # a corridor with a 2.0 m gap: its own row
     table = summary_table(pd.DataFrame(rows + narrower))
     assert len(table) == 2 and table.loc[0, "episodes"] == 3 and math.isclose(table.loc[0, "sr"], 29 / 30)
     assert math.isclose(table.loc[0, "all_succeeded"], 2 / 3)
@@ -232,11 +234,16 @@ def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir)
                        "sr": 1.0, "tt": 30.0, "cfi_0.5": 0.8, "cfi_0.1": 0.7, "cfi_0.01": 0.7, "tt_ratio": 1.4,
                        "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "sub1_cfi_0.5": 0.9, "eta": 2.17}] * 2
                      ).to_parquet(d / "results.parquet")
+    # staf's run is on the paper's map, lf's on the corridor made 10 m long: no paper numbers beside it
+    walls = OmegaConf.to_container(OmegaConf.load(conf_dir() / "scenario" / "corridor.yaml"))
+    OmegaConf.save({"scenario": walls}, workdir / "staf" / "config.yaml")
+    walls["obstacles"][0]["box"]["size"][0] = 10.0
+    OmegaConf.save({"scenario": walls}, workdir / "lf" / "config.yaml")
     (workdir / "empty").mkdir()
     assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'empty'}]"]) == 2
     assert not job_dirs(workdir)
     assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'lf'}]"]) == 0
     out = job_dirs(workdir)[0]
     text = (out / "table.md").read_text()
-    assert "[91.5]" in text and "[30.1]" in text and "staf-sub1" in text  # STAF line CFI, L&F line TT, Table 2
+    assert "[91.5]" in text and "[30.1]" not in text and "staf-sub1" in text  # STAF line CFI; not L&F's; Table 2
     assert (out / "cfi_vs_sigma.png").is_file() and len(pd.read_csv(out / "table.csv")) == 2

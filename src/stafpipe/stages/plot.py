@@ -3,6 +3,8 @@ own directory (which, like every run directory, carries its resolved config)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import logging
 from pathlib import Path
 
@@ -73,6 +75,24 @@ def _timing_tables(run_dir: Path) -> dict[str, str]:
     return {"timing.md": f"{caption}\n\n{markdown_timing(table)}", "timing.tex": latex_table(table, caption)}
 
 
+def _is_papers_corridor(run_dir: Path) -> bool:
+    """Whether an eval run is on STAF's Table-1 map: the shipped corridor's world and walls, unchanged by overrides."""
+    from stafpipe.paths import conf_dir
+
+    if not (run_dir / "config.yaml").is_file():
+        return False
+    def plain(x: Any) -> Any:  # containers with every number a float: 15 and 15.0 are the same wall
+        if isinstance(x, dict):
+            return {k: plain(v) for k, v in x.items()}
+        if isinstance(x, list):
+            return [plain(v) for v in x]
+        return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else x
+
+    run = OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml")).get("scenario") or {}
+    shipped = OmegaConf.to_container(OmegaConf.load(conf_dir() / "scenario" / "corridor.yaml"))
+    return all(plain(run.get(k)) == plain(shipped.get(k)) for k in ("world", "obstacles"))
+
+
 def _staf_tables(pc: PlotConfig) -> dict[str, str]:
     """STAF Table 1 (and Table 2 where teams split) from the results of eval runs, ours beside the paper's."""
     from stafpipe.plots.staf_tables import markdown, subteam_tables, summary_table
@@ -83,7 +103,7 @@ def _staf_tables(pc: PlotConfig) -> dict[str, str]:
         if not path.is_file():
             raise StafpipeError(f"plot.run_dirs: {d} holds no results.parquet (is it an eval run?)")
         try:
-            frames.append(pd.read_parquet(path).assign(run=run))
+            frames.append(pd.read_parquet(path).assign(run=run, paper_cell=_is_papers_corridor(Path(d))))
         except Exception as exc:  # pyarrow raises several kinds for a damaged file
             raise StafpipeError(f"plot.run_dirs: {path} is not a readable table ({type(exc).__name__})") from None
     results = pd.concat(frames, ignore_index=True)
