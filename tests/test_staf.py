@@ -104,6 +104,35 @@ def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
         assert gaps.min() == pytest.approx(t.spacing, abs=1e-6)  # at the team's spacing: there is room here
 
 
+def test_regroup_slides_targets_home_together(divide) -> None:
+    """At the regroup the robots that start home together have targets sliding on straight lines to their goal slots,
+    the same fraction of the way for all, the farthest target moving at the robot's top speed."""
+    sc = _scenario("corridor", "wedge")
+    geometry = Geometry(sc)
+    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
+    t, v = sc.spec.team, sc.spec.robot.max_speed
+    pos = place(sc.template(), t.start, math.radians(t.heading_deg))
+    goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
+    plan = StafPlan(PlanConfig(), sc, sc.template(), goal, centred_path(sc, geometry, ctx.passage_width),
+                    ctx.passage_width, divide)
+    seen, previous = 0, None
+    for _ in range(1500):
+        target = plan.step(pos, 0.1).copy()
+        if plan.regrouped and previous is not None:
+            frac = plan.home_frac
+            assert np.ptp(frac) < 1e-9  # here every robot was through when the regroup began: one batch
+            way = plan.goal - plan.home_from
+            assert np.allclose(target, plan.home_from + frac[:, None] * way)
+            assert np.linalg.norm(target - previous, axis=1).max() <= 0.1 * v + 1e-9
+            seen += 1
+        previous = target
+        pos = pos + (target - pos) * np.minimum(1.0, 0.1 * v / np.maximum(np.linalg.norm(target - pos, axis=1,
+                                                                                          keepdims=True), 1e-9))
+        if np.linalg.norm(pos - plan.goal, axis=1).max() < 0.05:
+            break
+    assert seen > 10 and plan.home_frac.min() == 1.0
+
+
 @pytest.mark.parametrize("name", ["narrowing", "multi_passage"])
 def test_plan_regroups_where_the_goal_area_is_close_to_the_narrow_part(divide, name) -> None:
     """narrowing: the front subteam reaches the goal before the last one is out; multi_passage: two passages off

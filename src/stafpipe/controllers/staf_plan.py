@@ -132,6 +132,7 @@ class StafPlan:
         self.cfg, self.goal_slots, self.divide = cfg, np.asarray(goal, float), divide
         self.kind, self.angle = spec.team.formation, spec.team.angle_deg
         self.spacing, self.radius = spec.team.spacing, spec.robot.radius
+        self.max_speed = spec.robot.max_speed
         self.n = len(goal)
         self.goal = self.goal_slots.copy()
         """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are alike."""
@@ -168,12 +169,17 @@ class StafPlan:
         self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
         self.targets = self.goal.copy()
+        # the way home at the regroup: each robot's target slides from where it was to its goal slot
+        self.home_from = np.zeros((self.n, 2))
+        self.home_frac = np.zeros(self.n)
+        self.home_rate = np.zeros(self.n)
+        self.homing = np.zeros(self.n, dtype=bool)
 
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
         """Targets (n, 2) for robots at `pos` (n, 2) after one control step of `dt` seconds."""
         if self.regrouped:
-            return self.targets
+            return self._home(dt)
         progress = self.frame.progress(pos)
         if self.anchor[0] < 0:
             self.anchor[0] = progress.mean()
@@ -183,17 +189,18 @@ class StafPlan:
         if self.split_done and not self.merging and (passed.all() or self.anchor[0] >= self.frame.length):
             self._start_regroup(pos)
         if self.merging and passed.all():
-            self._finish_regroup()
-            return self.targets
+            self._finish_regroup(pos)
+            return self._home(dt)
         self._release(progress)
         self._advance(progress, dt)
         if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
-            self._finish_regroup()
-            return self.targets
+            self._finish_regroup(pos)
+            return self._home(dt)
         self._place()
-        if self.merging:  # robots that are through take their goal slots; the others still follow their subteam
-            self.targets[passed] = self.goal[passed]
+        if self.merging:  # robots that are through head for their goal slots; the others still follow their subteam
+            self._start_home(passed, pos)
             self.labels[passed] = 0
+            return self._home(dt)
         return self.targets
 
     def _split(self, pos: np.ndarray, progress: np.ndarray) -> None:
@@ -245,10 +252,31 @@ class StafPlan:
             self.goal = self.goal_slots[assign_slots(pos, self.goal_slots)]
             self.events.append(("regroup", list(range(self.n)), f"m={len(self.order)}"))
 
-    def _finish_regroup(self) -> None:
+    def _finish_regroup(self, pos: np.ndarray) -> None:
         self.regrouped = True
         self.labels = np.zeros(self.n, dtype=int)
-        self.targets = self.goal.copy()
+        self._start_home(np.ones(self.n, dtype=bool), pos)
+
+    def _start_home(self, robots: np.ndarray, pos: np.ndarray) -> None:
+        """Robots (mask) not yet on their way home start now, together: their targets slide along straight lines to
+        their goal slots, all arriving at once, the farthest at the robot's top speed (no later than rushing). Sliding together keeps two robots' relative
+        position a blend of where they were and where their slots are; rushing each robot to its slot at full speed
+        let ways converge (measured on the bridge: two robots 0.62 m apart closed to contact)."""
+        new = robots & ~self.homing
+        if not new.any():
+            return
+        span = float(np.linalg.norm(self.goal[new] - pos[new], axis=1).max())
+        self.home_from[new] = pos[new]
+        self.home_frac[new] = 0.0
+        self.home_rate[new] = self.max_speed / max(span, 1e-6)
+        self.homing |= new
+
+    def _home(self, dt: float) -> np.ndarray:
+        """Advance the robots on their way home one step; their targets."""
+        h = self.homing
+        self.home_frac[h] = np.minimum(1.0, self.home_frac[h] + self.home_rate[h] * dt)
+        self.targets[h] = self.home_from[h] + self.home_frac[h, None] * (self.goal[h] - self.home_from[h])
+        return self.targets
 
     def _spacing(self, j: int, s: float) -> float:
         """Spacing of subteam j around arc length s: the team's, shrunk to fit the clearance ahead and behind."""
