@@ -259,9 +259,9 @@ class StafPlan:
 
     def _start_home(self, robots: np.ndarray, pos: np.ndarray) -> None:
         """Robots (mask) not yet on their way home start now, together: their targets slide along straight lines to
-        their goal slots, all arriving at once, the farthest at the robot's top speed (no later than rushing). Sliding together keeps two robots' relative
-        position a blend of where they were and where their slots are; rushing each robot to its slot at full speed
-        let ways converge (measured on the bridge: two robots 0.62 m apart closed to contact)."""
+        their goal slots, all arriving at once, the farthest at the robot's top speed (no later than rushing). Sliding
+        together keeps two robots' relative position a blend of where they were and where their slots are; rushing
+        each robot to its slot at full speed let ways converge (on the bridge: 0.62 m apart closed to contact)."""
         new = robots & ~self.homing
         if not new.any():
             return
@@ -329,8 +329,8 @@ class StafPlan:
     @property
     def expected(self) -> np.ndarray:
         """(n, n) d_ij of R^adp (STAF Sec. 3): the distance between two robots' targets, i.e. between their slots in
-        their subteam's (shrunk) formation or, once through at the regroup, between their goal slots. Only pairs in the
-        same subteam are used."""
+        their subteam's (shrunk) formation or, at the regroup, between their targets sliding to the goal slots. Only
+        pairs in the same subteam are used."""
         return np.linalg.norm(self.targets[:, None] - self.targets[None], axis=-1)
 
     def drain_events(self) -> list[tuple[str, list[int], str]]:

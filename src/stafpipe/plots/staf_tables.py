@@ -1,10 +1,10 @@
 """STAF's result tables from eval runs, ours beside the paper's (000_f89c49495043d27c.txt, Table 1; Table 2 is only
 described in the text: "a 100% success rate across all formations" for every subteam).
 
-One row per (run, method, formation, team size, drive, scenario) group of episodes (a run: one eval directory, so a
-corridor made narrower stays apart from the original; the paper's numbers only beside runs on its own map): mean and 95 % confidence half-width
-(Student t) of SR, TT, CFI at sigma 0.5 / 0.1 / 0.01, TT over its lower bound, collisions per episode, and the share of
-episodes in which every robot succeeded.
+One row per (run, method, formation, team size, drive, scenario) group of episodes (a run: one eval directory, so
+a corridor made narrower stays apart from the original; the paper's numbers only beside runs on its own map): mean
+and 95 % confidence half-width (Student t) of SR, TT, CFI at sigma 0.5 / 0.1 / 0.01, TT over its lower bound,
+collisions per episode, and the share of episodes in which every robot succeeded.
 """
 
 from __future__ import annotations
