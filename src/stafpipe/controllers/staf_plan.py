@@ -174,6 +174,9 @@ class StafPlan:
         self.home_frac = np.zeros(self.n)
         self.home_rate = np.zeros(self.n)
         self.homing = np.zeros(self.n, dtype=bool)
+        # the way into the subteams at the split: targets slide from where the robots were to their new slots
+        self.split_from: np.ndarray | None = None
+        self.split_frac, self.split_rate = 1.0, 0.0
 
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
@@ -197,6 +200,7 @@ class StafPlan:
             self._finish_regroup(pos)
             return self._home(dt)
         self._place()
+        self._slide_into_subteams(dt)
         if self.merging:  # robots that are through head for their goal slots; the others still follow their subteam
             self._start_home(passed, pos)
             self.labels[passed] = 0
@@ -231,8 +235,21 @@ class StafPlan:
         self.anchor = np.array(anchors)
         # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
         self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
+        self.split_from, self.split_frac, self.split_rate = pos.copy(), 0.0, 0.0
         self.events.append(("split", list(range(self.n)),
                             f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
+
+    def _slide_into_subteams(self, dt: float) -> None:
+        """After the split the targets slide from where the robots were to their subteam slots, all the same fraction
+        of the way, the farthest at top speed: as at the regroup (`_start_home`), jumping targets sent neighbours at
+        full speed on converging ways (measured on the doorway: two robots 0.95 m apart closed to contact)."""
+        if self.split_from is None or self.split_frac >= 1.0:
+            return
+        if self.split_rate == 0.0:
+            span = float(np.linalg.norm(self.targets - self.split_from, axis=1).max())
+            self.split_rate = self.max_speed / max(span, 1e-6)
+        self.split_frac = min(1.0, self.split_frac + self.split_rate * dt)
+        self.targets = self.split_from + self.split_frac * (self.targets - self.split_from)
 
     def _formed(self, j: int, pos: np.ndarray) -> np.ndarray:
         """Waiting targets of subteam j: its formation at the team's spacing, centred on the subteam's centroid and
