@@ -13,7 +13,7 @@ from stafpipe.highlevel.config import HighLevelConfig
 from stafpipe.highlevel.graphs import Team, make_batch, radius_edges
 from stafpipe.highlevel.loss import balance_printed, loss_terms
 from stafpipe.highlevel.model import DeepGraphCut
-from stafpipe.highlevel.partition import choose_m, formation_width, partition_stats, repair
+from stafpipe.highlevel.partition import balance_sizes, balanced_kmeans, choose_m, formation_width, partition_stats, repair
 
 CFG = HighLevelConfig()
 
@@ -94,6 +94,23 @@ def test_repair_fills_empty_subteams_and_reconnects_parts() -> None:
     stats = partition_stats(split, team.pos, team.goal, edges, 3)
     assert stats["connected"] == 1.0 and stats["empty_subteams"] == 0.0
     assert len(set(split[:4])) == 2 and len(set(split[4:])) <= 2
+
+
+def test_balance_sizes_evens_out_a_lopsided_cut_and_keeps_a_balanced_one() -> None:
+    line = formation_slots("line", 10, 1.0)  # abreast: y from 4.5 down to -4.5
+    lopsided = np.array([0, 0, 0, 1, 2, 2, 2, 3, 3, 3])  # 3-1-3-3, what the shipped cut gives at m = 4
+    labels = balance_sizes(lopsided, line, 4)
+    assert sorted(np.bincount(labels, minlength=4)) == [2, 2, 3, 3]
+    for j in range(4):  # each subteam is a run of neighbours along the line, and keeps its place in it
+        members = np.flatnonzero(labels == j)
+        assert np.ptp(members) == len(members) - 1
+    assert labels[0] == 0 and labels[-1] == 3 and labels[4] in (1, 2)
+    even = np.array([0, 0, 0, 1, 1, 1, 2, 2, 3, 3])
+    assert (balance_sizes(even, line, 4) == even).all()
+    rng = np.random.default_rng(0)
+    for m in (3, 4):
+        pos, goal = rng.normal(0, 3, (10, 2)), rng.normal(0, 3, (10, 2))
+        assert np.ptp(np.bincount(balanced_kmeans(pos, goal, m, 0), minlength=m)) <= 1
 
 
 def test_adaptive_m_uses_the_formation_width() -> None:

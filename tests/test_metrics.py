@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from stafpipe.formations import formation_slots, place
-from stafpipe.integrity import circle_integrity, formation_integrity, line_integrity, v_integrity
+from stafpipe.integrity import circle_integrity, formation_integrity, line_integrity, v_integrity, wedge_shape_integrity
 from stafpipe.metrics import MetricContext, Trajectory, cfi, connectivity, episode_metrics, success_rate, travel_time
 
 
@@ -38,6 +38,22 @@ def test_integrity_known_values() -> None:
     l_m = np.linalg.norm((lb + rb) / 2 - apex)
     expected = 1 - 2 * abs(l_l - l_r) / (l_l + l_r) - abs(2 * l_m - l_b) / l_b
     assert v_integrity(np.stack([apex, lb, rb]), 0.0) == pytest.approx(max(0.0, expected))
+
+
+@pytest.mark.parametrize("n", [3, 4, 9, 10, 20])
+def test_wedge_is_judged_as_a_shape_whichever_way_it_faces(n) -> None:
+    rng = np.random.default_rng(n)
+    wedge = formation_slots("wedge", n, 1.0)
+    for facing in rng.uniform(-math.pi, math.pi, 4):
+        p = place(wedge, (1.0, 2.0), facing)
+        # the heading passed (a subteam drifting backwards) no longer decides the apex
+        assert formation_integrity(p, "wedge", 1.0, facing + math.pi, 90.0) == pytest.approx(1.0, abs=1e-6 if n <= 16 else 0.05)
+        assert v_integrity(p, facing + math.pi) < 0.5  # as judged facing the other way
+    # not every shape is a wedge: three in a row, and a wedge with one arm folded in
+    assert wedge_shape_integrity(np.array([[0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])) == 0.0
+    bent = formation_slots("wedge", 7, 1.0)
+    bent[-1] = bent[-3]  # the last robot of one arm stands on its neighbour's place
+    assert wedge_shape_integrity(bent + [0.0, 0.01]) < 0.8
 
 
 def test_cfi_gap_band() -> None:

@@ -35,14 +35,14 @@ def _scenario(name: str, kind: str, n: int | None = None):
     return build_scenario(dataclasses.replace(sc.spec, team=team))
 
 
-def _ideal_run(sc, divide, steps: int = 1500):
+def _ideal_run(sc, divide, steps: int = 1500, plan_cfg: PlanConfig | None = None):
     """Robots that move straight to their plan targets at the robot's max speed: the plan alone, no policy."""
     geometry = Geometry(sc)
     ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
     path = centred_path(sc, geometry, ctx.passage_width)
     t, v = sc.spec.team, sc.spec.robot.max_speed
     pos, goal = place(sc.template(), t.start, math.radians(t.heading_deg)), place(sc.template(), t.goal, math.radians(t.heading_deg))
-    plan = StafPlan(PlanConfig(), sc, sc.template(), goal, path, ctx.passage_width, divide)
+    plan = StafPlan(plan_cfg or PlanConfig(), sc, sc.template(), goal, path, ctx.passage_width, divide)
     log = {"events": [], "min_gap": np.inf, "min_wall": np.inf, "labels": [], "progress": []}
     for k in range(steps):
         target = plan.step(pos, 0.1)
@@ -64,15 +64,18 @@ def divide():
     return divider()
 
 
-@pytest.mark.parametrize("kind, m", [("circle", 2), ("wedge", 3), ("line", 4)])
-def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m) -> None:
-    tt, log, ctx = _ideal_run(_scenario("corridor", kind), divide)
+@pytest.mark.parametrize("kind, m, balance", [("circle", 2, False), ("wedge", 3, False), ("line", 4, False),
+                                              ("line", 4, True)])
+def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m, balance) -> None:
+    tt, log, ctx = _ideal_run(_scenario("corridor", kind), divide, plan_cfg=PlanConfig(balance=balance))
     assert log["events"] == ["split", "regroup"]
     assert tt < 1.45 * ctx.travel_time_lower_bound  # the plan itself stays within the TT target (1.5 x the bound)
     assert log["min_gap"] > 0.05 and log["min_wall"] > 0.1  # targets keep robots apart and off the walls
     split = next(k for k, lab in enumerate(log["labels"]) if lab.max() > 0)
     labels = log["labels"][split]
     assert labels.max() + 1 == m
+    if balance:
+        assert np.ptp(np.bincount(labels)) <= 1
     # inside the corridor (x 12..18 -> arc 8..14) subteam j + 1 is behind subteam j: one after another
     for k in range(split, len(log["labels"])):
         if log["labels"][k].max() == 0:

@@ -33,6 +33,32 @@ def circle_integrity(p: np.ndarray) -> float:
     return _clip(1.0 - float(np.mean(np.abs(theta - ideal))) / ideal)
 
 
+def _v_scores(p: np.ndarray, headings: np.ndarray, apex_deg: float) -> np.ndarray:
+    """`v_integrity` of the (k >= 3, 2) robots `p` at each of the headings (H,), vectorised over the headings."""
+    n, rows = len(p), np.arange(len(headings))
+    c = p - p.mean(axis=0)
+    cos, sin = np.cos(headings)[:, None], np.sin(headings)[:, None]
+    x, y = c[None, :, 0] * cos + c[None, :, 1] * sin, -c[None, :, 0] * sin + c[None, :, 1] * cos  # x ahead, y left
+    order = np.argsort(-x, axis=1, kind="stable")
+    first, second = order[:, 0], order[:, 1]
+    fx, fy, sx, sy = x[rows, first], y[rows, first], x[rows, second], y[rows, second]
+    half = math.radians(apex_deg) / 2.0
+    gap = np.abs(fy - sy)
+    virtual = (n % 2 == 0) & (fx - sx < 0.25 * np.maximum(gap, 1e-9))
+    ax = np.where(virtual, (fx + sx) / 2.0 + gap / 2.0 / math.tan(half), fx)
+    ay = np.where(virtual, (fy + sy) / 2.0, fy)
+    rest = np.ones(x.shape, dtype=bool)
+    rest[rows[~virtual], first[~virtual]] = False
+    left, right = rest & (y > ay[:, None]), rest & (y <= ay[:, None])
+    lb, rb = np.where(left, x, np.inf).argmin(axis=1), np.where(right, x, np.inf).argmin(axis=1)
+    lx, ly, rx, ry = x[rows, lb], y[rows, lb], x[rows, rb], y[rows, rb]
+    l_l, l_r, l_b = np.hypot(lx - ax, ly - ay), np.hypot(rx - ax, ry - ay), np.hypot(lx - rx, ly - ry)
+    l_m = np.hypot((lx + rx) / 2.0 - ax, (ly + ry) / 2.0 - ay)
+    ideal_m = l_b / 2.0 / math.tan(half)
+    score = 1.0 - 2.0 * np.abs(l_l - l_r) / np.maximum(l_l + l_r, 1e-12) - np.abs(l_m - ideal_m) / np.maximum(ideal_m, 1e-9)
+    return np.where(left.any(axis=1) & right.any(axis=1), np.clip(score, 0.0, 1.0), 0.0)
+
+
 def v_integrity(p: np.ndarray, heading: float, apex_deg: float = WEDGE_APEX_DEG) -> float:
     """STAF App. D wedge: 1 - 2|L_l - L_r| / (L_l + L_r) - |2 L_m - L_b| / L_b (as printed, for a 90 degree apex).
 
@@ -40,29 +66,31 @@ def v_integrity(p: np.ndarray, heading: float, apex_deg: float = WEDGE_APEX_DEG)
     printed term when a = 90. The apex is the front-most robot; when the two front-most robots stand level (even n),
     the apex is the virtual point ahead of them where the template puts it.
     """
+    if len(p) < 3:
+        return 1.0
+    return float(_v_scores(np.asarray(p, float), np.array([heading]), apex_deg)[0])
+
+
+def wedge_shape_integrity(p: np.ndarray, apex_deg: float = WEDGE_APEX_DEG) -> float:
+    """STAF App. D wedge judged as a shape, whichever way it faces: the best `v_integrity` over the axes the wedge can
+    have (centroid to a robot, the apex; centroid to the midpoint of two robots, the front pair of an even wedge).
+
+    The printed formula names only the triangle's sides, no heading. Judged at the velocity's heading instead, a
+    subteam standing in a perfect wedge while drifting at 0.1 m/s scored 0 (docs/metrics.md). Teams above 16 robots
+    try 72 headings every 5 degrees instead of all pairs.
+    """
     n = len(p)
     if n < 3:
         return 1.0
-    local = (p - p.mean(axis=0)) @ rotation(heading)  # x ahead, y left
-    order = np.argsort(-local[:, 0])
-    half = math.radians(apex_deg) / 2.0
-    first, second = local[order[0]], local[order[1]]
-    gap = abs(first[1] - second[1])
-    if n % 2 == 0 and first[0] - second[0] < 0.25 * max(gap, 1e-9):
-        mid = (first + second) / 2.0
-        apex = mid + np.array([gap / 2.0 / math.tan(half), 0.0])
-        rest = local
+    c = p - p.mean(axis=0)
+    if n <= 16:
+        i, j = np.triu_indices(n, 1)
+        axes = np.concatenate([c, (c[i] + c[j]) / 2.0])
+        axes = axes[np.linalg.norm(axes, axis=1) > 1e-9]
+        headings = np.arctan2(axes[:, 1], axes[:, 0])
     else:
-        apex = first
-        rest = np.delete(local, order[0], axis=0)
-    left, right = rest[rest[:, 1] > apex[1]], rest[rest[:, 1] <= apex[1]]
-    if len(left) == 0 or len(right) == 0:
-        return 0.0
-    lb, rb = left[left[:, 0].argmin()], right[right[:, 0].argmin()]
-    l_l, l_r, l_b = np.linalg.norm(lb - apex), np.linalg.norm(rb - apex), np.linalg.norm(lb - rb)
-    l_m = np.linalg.norm((lb + rb) / 2.0 - apex)
-    ideal_m = l_b / 2.0 / math.tan(half)
-    return _clip(1.0 - 2.0 * abs(l_l - l_r) / (l_l + l_r) - abs(l_m - ideal_m) / max(ideal_m, 1e-9))
+        headings = np.radians(np.arange(0.0, 360.0, 5.0))
+    return float(_v_scores(p, headings, apex_deg).max())
 
 
 def line_integrity(p: np.ndarray) -> float:
@@ -100,7 +128,7 @@ def formation_integrity(p: np.ndarray, kind: str, spacing: float, heading: float
     if kind == "circle":
         return circle_integrity(p)
     if kind == "wedge":
-        return v_integrity(p, heading, WEDGE_APEX_DEG)
+        return wedge_shape_integrity(p, WEDGE_APEX_DEG)
     if kind == "v":
         return v_integrity(p, heading, angle_deg)
     if kind == "line":

@@ -44,6 +44,9 @@ class PlanConfig:
     """Free space (m) between a subteam and the one ahead of it along the path."""
     split_distance: float = 5.0
     """The team splits when its progress is this close (m) to the first narrow part (at once if already closer)."""
+    balance: bool = False
+    """True: subteam sizes within one of each other (`highlevel.partition.balance_sizes`; the line's 3-1-3-3 becomes
+    3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
     high_checkpoint: str = ""
     """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
 
@@ -212,6 +215,10 @@ class StafPlan:
         if self.m_wanted <= 1:
             return
         labels = np.asarray(self.divide(pos, self.goal, self.m_wanted), dtype=int)
+        if self.cfg.balance:
+            from stafpipe.highlevel.partition import balance_sizes
+
+            labels = balance_sizes(labels, pos, self.m_wanted)
         teams = [np.flatnonzero(labels == j) for j in np.unique(labels)]
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
         lateral = np.abs(self.frame.lateral(pos))

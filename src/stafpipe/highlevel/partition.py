@@ -124,21 +124,54 @@ def spectral_partition(pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: 
     return sc.fit_predict(affinity)
 
 
+def _balanced_seats(n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Seats for a min-cost assignment that gives every one of m subteams floor(n/m) or ceil(n/m) robots: floor(n/m)
+    required seats per subteam (a bonus that outweighs any cost, so all are taken) and one optional seat each."""
+    low = n // m
+    seats = np.concatenate([np.repeat(np.arange(m), low), np.arange(m)])
+    required = np.arange(len(seats)) < m * low
+    return seats, required
+
+
+def _assign_to_seats(cost: np.ndarray, m: int) -> np.ndarray:
+    """Labels from a (n, m) robot-to-subteam cost: min-cost assignment (scipy) onto `_balanced_seats`."""
+    n = len(cost)
+    seats, required = _balanced_seats(n, m)
+    seat_cost = cost[:, seats] - required * (1.0 + 2.0 * float(np.abs(cost).max()) * n)
+    rows, cols = linear_sum_assignment(seat_cost)
+    labels = np.empty(n, dtype=int)
+    labels[rows] = seats[cols]
+    return labels
+
+
+def balance_sizes(labels: np.ndarray, pos: np.ndarray, m: int) -> np.ndarray:
+    """Subteam sizes within one of each other (floor(n/m) or ceil(n/m)), keeping the given subteams where they already
+    are; otherwise each robot goes to the nearest subteam centroid that has a seat left (min-cost assignment).
+
+    Why: STAF's cut loss has a balance term (Eq. (1), Fig. 7) but the shipped network's argmax at m = 4 leaves a subteam
+    empty and the repair gives it one robot (docs/method.md): a one-robot "line" cannot keep a formation. Used by STAF's
+    plan (`plan.balance`); docs/staf.md.
+    """
+    labels = np.asarray(labels, dtype=int)
+    n, m = len(labels), min(m, len(labels))
+    sizes = np.bincount(labels, minlength=m)[:m]
+    if m <= 1 or (sizes.min() >= n // m and sizes.max() <= -(-n // m)):
+        return labels.copy()
+    centres = np.stack([pos[labels == j].mean(0) if sizes[j] else pos.mean(0) for j in range(m)])
+    return _assign_to_seats(((pos[:, None, :] - centres[None]) ** 2).sum(-1), m)
+
+
 def balanced_kmeans(pos: np.ndarray, goal: np.ndarray, m: int, seed: int, iters: int = 20) -> np.ndarray:
     """k-means on (start, goal) with equal sizes (within one): Lloyd steps whose assignment step is a min-cost
-    assignment of robots to ceil(n/m) seats per cluster (scipy's linear_sum_assignment)."""
+    assignment of robots to floor(n/m) required and one optional seat per cluster (scipy's linear_sum_assignment)."""
     n = len(pos)
     if m <= 1:
         return np.zeros(n, dtype=int)
     x = np.concatenate([pos - pos.mean(0), goal - goal.mean(0)], axis=1)
     centres = KMeans(n_clusters=m, n_init=4, random_state=seed).fit(x).cluster_centers_
-    seats = np.repeat(np.arange(m), math.ceil(n / m))
     labels = np.full(n, -1)
     for _ in range(iters):
-        cost = ((x[:, None, :] - centres[seats][None, :, :]) ** 2).sum(-1)
-        rows, cols = linear_sum_assignment(cost)
-        new = np.empty(n, dtype=int)
-        new[rows] = seats[cols]
+        new = _assign_to_seats(((x[:, None, :] - centres[None, :, :]) ** 2).sum(-1), m)
         if (new == labels).all():
             break
         labels = new
