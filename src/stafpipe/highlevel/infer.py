@@ -23,22 +23,24 @@ def predict(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
     return _predict(model, teams, [team_graph(t, cfg.features, cfg.radius) for t in teams])
 
 
-@torch.no_grad()
-def _predict(model: DeepGraphCut, teams: Sequence[Team], graphs: list[TeamGraph]) -> list[np.ndarray]:
+def _predict(model: DeepGraphCut, teams: Sequence[Team], graphs: list[TeamGraph],
+             fast: NumpyGraphCut | None = None) -> list[np.ndarray]:
+    """`fast`: the model's numpy copy when the caller keeps one (the weights are copied per call otherwise)."""
     cfg = model.cfg
     if len(teams) == 1 and teams[0].n <= SMALL_TEAM:
-        return [NumpyGraphCut(model)(graphs[0].x, graphs[0].edges, min(teams[0].m, cfg.m_max))]
-    y = model(collate(graphs, [min(t.m, cfg.m_max) for t in teams])).numpy()
+        return [(fast if fast is not None else NumpyGraphCut(model))(graphs[0].x, graphs[0].edges, min(teams[0].m, cfg.m_max))]
+    with torch.no_grad():
+        y = model(collate(graphs, [min(t.m, cfg.m_max) for t in teams])).numpy()
     bounds = np.cumsum([0] + [t.n for t in teams])
     return [y[bounds[k] : bounds[k + 1]] for k in range(len(teams))]
 
 
-def divide(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
+def divide(model: DeepGraphCut, teams: Sequence[Team], fast: NumpyGraphCut | None = None) -> list[np.ndarray]:
     """Subteam label (0 .. m-1) of every robot of each team: argmax of Y, repaired (non-empty, connected where possible)."""
     cfg = model.cfg
     graphs = [team_graph(t, cfg.features, cfg.radius) for t in teams]
     out = []
-    for team, graph, y in zip(teams, graphs, _predict(model, teams, graphs), strict=True):
+    for team, graph, y in zip(teams, graphs, _predict(model, teams, graphs, fast), strict=True):
         if team.m <= 1:
             out.append(np.zeros(team.n, dtype=int))
             continue
@@ -61,8 +63,9 @@ def divider(checkpoint: str = ""):
     from stafpipe.highlevel.checkpoint import load_checkpoint
 
     model, _ = load_checkpoint(checkpoint)
+    fast = NumpyGraphCut(model)  # the loaded weights never change: copy them once, not at every split
 
     def divide_team(pos: np.ndarray, goal: np.ndarray, m: int) -> np.ndarray:
-        return divide(model, [Team(np.asarray(pos, float), np.asarray(goal, float), m)])[0]
+        return divide(model, [Team(np.asarray(pos, float), np.asarray(goal, float), m)], fast)[0]
 
     return divide_team
