@@ -236,8 +236,9 @@ def test_subteam_metrics_and_staf_table() -> None:
     assert len(table) == 2 and table.loc[0, "episodes"] == 3 and math.isclose(table.loc[0, "sr"], 29 / 30)
     assert math.isclose(table.loc[0, "all_succeeded"], 2 / 3)
     text = markdown(table, "t")
-    assert text.count("[87.8]") == 1 and "[102.1]" in text  # the paper's STAF circle numbers beside ours, not beside
-    assert "| 1.80 |" in text  # the narrower corridor's
+    # the paper's STAF circle numbers beside our corridor row, not beside the narrower corridor's (eta 1.80)
+    assert text.count("[87.8]") == 1 and "[102.1]" in text
+    assert "| 1.80 |" in text
     assert subteam_tables(pd.DataFrame(rows)).loc[0, "method"] == "staf-sub1"
 
 

@@ -253,8 +253,7 @@ class StafPlan:
         if self.split_from is None or self.split_frac >= 1.0:
             return
         if self.split_rate == 0.0:
-            span = float(np.linalg.norm(self.targets - self.split_from, axis=1).max())
-            self.split_rate = self.max_speed / max(span, 1e-6)
+            self.split_rate = self._top_speed_rate(self.split_from, self.targets)
         self.split_frac = min(1.0, self.split_frac + self.split_rate * dt)
         self.targets = self.split_from + self.split_frac * (self.targets - self.split_from)
 
@@ -289,11 +288,15 @@ class StafPlan:
         new = robots & ~self.homing
         if not new.any():
             return
-        span = float(np.linalg.norm(self.goal[new] - pos[new], axis=1).max())
         self.home_from[new] = pos[new]
         self.home_frac[new] = 0.0
-        self.home_rate[new] = self.max_speed / max(span, 1e-6)
+        self.home_rate[new] = self._top_speed_rate(pos[new], self.goal[new])
         self.homing |= new
+
+    def _top_speed_rate(self, start: np.ndarray, end: np.ndarray) -> float:
+        """Fraction of the way per second for targets sliding from `start` to `end` together (split and regroup
+        slides): the one with the longest way moves at the robot's top speed."""
+        return self.max_speed / max(float(np.linalg.norm(end - start, axis=1).max()), 1e-6)
 
     def _home(self, dt: float) -> np.ndarray:
         """Advance the robots on their way home one step; their targets."""

@@ -3,10 +3,9 @@ own directory (which, like every run directory, carries its resolved config)."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import logging
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 from matplotlib.figure import Figure
@@ -75,22 +74,24 @@ def _timing_tables(run_dir: Path) -> dict[str, str]:
     return {"timing.md": f"{caption}\n\n{markdown_timing(table)}", "timing.tex": latex_table(table, caption)}
 
 
+def _floats(x: Any) -> Any:
+    """A config container with every number a float: 15 and 15.0 are the same wall."""
+    if isinstance(x, dict):
+        return {k: _floats(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_floats(v) for v in x]
+    return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else x
+
+
 def _is_papers_corridor(run_dir: Path) -> bool:
     """Whether an eval run is on STAF's Table-1 map: the shipped corridor's world and walls, unchanged by overrides."""
     from stafpipe.paths import conf_dir
 
     if not (run_dir / "config.yaml").is_file():
         return False
-    def plain(x: Any) -> Any:  # containers with every number a float: 15 and 15.0 are the same wall
-        if isinstance(x, dict):
-            return {k: plain(v) for k, v in x.items()}
-        if isinstance(x, list):
-            return [plain(v) for v in x]
-        return float(x) if isinstance(x, int | float) and not isinstance(x, bool) else x
-
     run = OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml")).get("scenario") or {}
     shipped = OmegaConf.to_container(OmegaConf.load(conf_dir() / "scenario" / "corridor.yaml"))
-    return all(plain(run.get(k)) == plain(shipped.get(k)) for k in ("world", "obstacles"))
+    return all(_floats(run.get(k)) == _floats(shipped.get(k)) for k in ("world", "obstacles"))
 
 
 def _staf_tables(pc: PlotConfig) -> dict[str, str]:
