@@ -3,7 +3,7 @@ from typer.testing import CliRunner
 from stafpipe.cli import app
 
 runner = CliRunner()
-STAGES = ["generate", "train-high", "train-ppo", "eval", "ablate", "plot", "run", "inspect"]
+STAGES = ["generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot", "run", "inspect"]
 
 
 def test_help_lists_every_stage() -> None:

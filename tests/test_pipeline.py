@@ -5,6 +5,7 @@ from stafpipe.errors import StafpipeError
 from stafpipe.pipeline import run_pipeline
 
 
+@pytest.mark.slow  # over 10 s on 2 cores
 def test_smoke_runs_then_skips_then_forces(workdir, capsys) -> None:
     assert run_pipeline("smoke") == 0
     first = {d: (d / "stage.json").stat().st_mtime_ns for d in job_dirs(workdir)}

@@ -81,6 +81,7 @@ def test_training_is_deterministic_and_resumes_exactly(tmp_path) -> None:
     assert [r["charts/episode_return"] for r in rhist] == [r["charts/episode_return"] for r in hist]
 
 
+@pytest.mark.slow  # over 10 s on 2 cores
 def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
     assert launch("train-ppo", TINY) == 0
     [run] = job_dirs(workdir)

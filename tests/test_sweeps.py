@@ -16,7 +16,8 @@ def _configs(root):
     )
 
 
-@pytest.mark.parametrize("launcher", [[], ["hydra/launcher=local", "hydra.launcher.n_jobs=2"]], ids=["basic", "joblib"])
+@pytest.mark.parametrize("launcher", [[], pytest.param(["hydra/launcher=local", "hydra.launcher.n_jobs=2"],
+                                                        marks=pytest.mark.slow)], ids=["basic", "joblib"])
 def test_two_by_two_multirun_gives_four_jobs(workdir, launcher) -> None:
     code = launch("generate", ["-m", *launcher, "formation=circle,wedge", "seed=1,2", *SMALL])
     assert code == 0
@@ -25,6 +26,7 @@ def test_two_by_two_multirun_gives_four_jobs(workdir, launcher) -> None:
         assert (d / "formations.parquet").is_file()
 
 
+@pytest.mark.slow  # over 10 s on 2 cores
 def test_submitit_local_two_jobs(workdir) -> None:
     code = launch("generate", ["-m", "hydra/launcher=submitit_local", "seed=5,6", *SMALL])
     assert code == 0

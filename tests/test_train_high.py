@@ -27,6 +27,7 @@ def _weights(model):
     return [p.detach().clone() for p in model.parameters()]
 
 
+@pytest.mark.slow  # over 10 s on 2 cores
 def test_training_is_deterministic_and_resumes_to_the_same_weights(tmp_path, monkeypatch) -> None:
     tc = TrainHighConfig(epochs=3, batch_size=8)
     graphs = _graphs()

@@ -28,6 +28,12 @@ def generate(ctx: typer.Context) -> None:
     _stage("generate", ctx.args)
 
 
+@app.command("generate-maps", context_settings=_HYDRA_ARGS)
+def generate_maps(ctx: typer.Context) -> None:
+    """Generate seeded procedural training maps (corridors, doorways, bends, gaps, bollards, fields) as scenario YAMLs."""
+    _stage("generate-maps", ctx.args)
+
+
 @app.command("train-high", context_settings=_HYDRA_ARGS)
 def train_high(ctx: typer.Context) -> None:
     """Train STAF's high level (deep graph cut for subteaming) on a generated dataset."""

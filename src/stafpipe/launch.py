@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 # Stage name (as typed on the command line) -> "module:function" (a test checks it matches the CLI).
 STAGE_FUNCTIONS: dict[str, str] = {
     "generate": "stafpipe.stages.generate:run_generate",
+    "generate-maps": "stafpipe.stages.generate_maps:run_generate_maps",
     "eval": "stafpipe.stages.eval:run_eval",
     "plot": "stafpipe.stages.plot:run_plot",
     "train-high": "stafpipe.stages.train_high:run_train_high",

@@ -22,7 +22,7 @@ from stafpipe.errors import StafpipeError
 from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, launch
 from stafpipe.paths import conf_dir, pipelines_dir
 
-STAGES = ("generate", "train-high", "train-ppo", "eval", "ablate", "plot")
+STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
 _STEP_REF = re.compile(r"\{steps\.([A-Za-z0-9_-]+)\.dir\}")
 
 

@@ -15,6 +15,7 @@ from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
 from stafpipe.highlevel.config import AblateConfig, HighLevelConfig, TrainHighConfig
 from stafpipe.learning.config import TrainPPOConfig
+from stafpipe.mapgen import MapsConfig
 from stafpipe.scenario import ScenarioConfig
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
@@ -109,6 +110,9 @@ class EvalConfig:
     """Safety margin (m) taken off each side of the narrowest passage for CFI's eta (STAF Section 4)."""
     log_episodes: bool = True
     """Write one MCAP file per episode under episodes/."""
+    label: str = ""
+    """Free text written into every results row (column `label`): tells variants of one method apart in
+    `stafpipe plot table` (e.g. the `staf_levels` ablation)."""
 
     def check(self, key: str = "eval") -> None:
         require(self.episodes >= 1, f"{key}.episodes", "must be >= 1", self.episodes)
@@ -163,6 +167,7 @@ class StafConfig:
     formation: FormationConfig = field(default_factory=FormationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     data: DataConfig = field(default_factory=DataConfig)
+    maps: MapsConfig = field(default_factory=MapsConfig)
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     method: Any = MISSING
     """The method (group `method`); each option has its own dataclass (stafpipe.controllers.METHODS)."""

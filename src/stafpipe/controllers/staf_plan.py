@@ -28,8 +28,20 @@ from stafpipe.geometry import obstacle_distance
 class PlanConfig:
     """Execution settings of STAF's plan (part of `method=staf` and of `train_ppo.staf`)."""
 
-    m: str = "auto"
-    """Subteams: `auto` (smallest m whose subteams fit the narrowest passage, STAF Sec. 7) or a fixed number."""
+    m: str = "2"
+    """Subteams: a fixed number (2: STAF Table 1, Table 2 and Fig. 4 divide every team into two) or `auto` (our
+    extension: the smallest m whose subteams fit the narrowest passage at the smallest spacing, STAF Sec. 7)."""
+    adapt: str = "learned"
+    """Formation adaptation in a narrow passage: `learned` (the plan keeps each subteam's formation at the team's
+    nominal spacing and the policy deforms it, trained under R^adp: STAF Sec. 3) or `geometric` (the plan shrinks the
+    subteam's spacing to the free width; a comparison without learned adaptation, docs/staf.md)."""
+    single_file: bool = True
+    """Where a subteam's formation does not fit even at the smallest spacing (2r + min_gap; e.g. bollards 1.1 m
+    apart, or five robots abreast in 2.4 m), the plan turns its slots into a column along the path (blended in over
+    `file_ramp` metres); false keeps the formation's slots there too (docs/staf.md)."""
+    file_ramp: float = 2.0
+    """Distance (m) over which slots blend from the formation into the column before a single-file stretch and back
+    after it."""
     safe_gap: float = 0.3
     """Gap (m) between robot surfaces assumed when testing whether a subteam fits (as `high.safe_gap`)."""
     min_gap: float = 0.2
@@ -55,7 +67,8 @@ class PlanConfig:
 
         require(self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4",
                 self.m)
-        for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance"):
+        require(self.adapt in ("learned", "geometric"), f"{key}.adapt", "must be learned or geometric", self.adapt)
+        for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
 
@@ -150,7 +163,22 @@ class StafPlan:
         self.narrow_start = float(np.argmax(narrow) * self.ds) if narrow.any() else math.inf
         self.narrow_end = float((len(narrow) - 1 - np.argmax(narrow[::-1])) * self.ds) if narrow.any() else -math.inf
         self.m_wanted = self._m_wanted(passage_width) if narrow.any() else 1
+        # the whole team walks in single file only where it will not split (it splits before the narrow part)
+        alone = narrow.any() and self.m_wanted <= 1
+        self.file_weight = self._file_weights(self.full_slots / self.spacing) if alone else self.clear * 0.0
         self.reset()
+
+    def _file_weights(self, unit: np.ndarray) -> np.ndarray:
+        """(path samples,) how far a formation of unit-spacing slots `unit` must be a column there (0..1): 1 where it
+        does not fit the free width at the smallest spacing, ramping down over `file_ramp` metres on either side."""
+        if not self.cfg.single_file or len(unit) < 2:
+            return np.zeros(len(self.clear))
+        smallest = _extent(unit * (2 * self.radius + self.cfg.min_gap), self.radius)[1]
+        tight = np.flatnonzero(2 * (self.clear - self.cfg.margin) < smallest)
+        if not len(tight):
+            return np.zeros(len(self.clear))
+        gap = np.abs(np.arange(len(self.clear))[:, None] - tight[None]).min(axis=1) * self.ds
+        return np.clip(1.0 - gap / max(self.cfg.file_ramp, 1e-9), 0.0, 1.0)
 
     def _m_wanted(self, eta: float) -> int:
         from stafpipe.highlevel.partition import choose_m
@@ -169,6 +197,7 @@ class StafPlan:
         self.regrouped = False
         self.merging = False
         self.hold: list[np.ndarray | None] = [None]
+        self.file_weights = [self.file_weight]  # per subteam: where it walks in single file
         self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
         self.targets = self.goal.copy()
@@ -228,6 +257,8 @@ class StafPlan:
         for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
             unit = unit_slots(self.kind, len(idx), self.angle)
             depth = _extent(unit * self.spacing, self.radius)[0]
+            if self._file_weights(unit).any():  # room for the column the subteam becomes in single file
+                depth = max(depth, (len(idx) - 1) * self.spacing + 2 * self.radius)
             a = progress.max() + depth / 2 if not anchors else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
             point, heading = self.frame.at(a)
             c, s = math.cos(heading), math.sin(heading)
@@ -239,6 +270,7 @@ class StafPlan:
         self.labels = np.zeros(self.n, dtype=int)
         for j, idx in enumerate(self.order):
             self.labels[idx] = j
+        self.file_weights = [self._file_weights(unit) for unit in self.slots]
         self.anchor = np.array(anchors)
         # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
         self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
@@ -288,9 +320,9 @@ class StafPlan:
         new = robots & ~self.homing
         if not new.any():
             return
-        self.home_from[new] = pos[new]
+        self.home_from[new] = self.targets[new]  # from where each target is now: no target jumps
         self.home_frac[new] = 0.0
-        self.home_rate[new] = self._top_speed_rate(pos[new], self.goal[new])
+        self.home_rate[new] = self._top_speed_rate(self.targets[new], self.goal[new])
         self.homing |= new
 
     def _top_speed_rate(self, start: np.ndarray, end: np.ndarray) -> float:
@@ -306,7 +338,10 @@ class StafPlan:
         return self.targets
 
     def _spacing(self, j: int, s: float) -> float:
-        """Spacing of subteam j around arc length s: the team's, shrunk to fit the clearance ahead and behind."""
+        """Spacing of subteam j around arc length s: the team's (adapt=learned), or (adapt=geometric) the team's shrunk
+        to fit the clearance ahead and behind."""
+        if self.cfg.adapt == "learned":
+            return self.spacing
         depth, width = _extent(self.slots[j] * self.spacing, self.radius)
         lo, hi = int(max(0.0, s - depth) / self.ds), int((s + depth + 1.0) / self.ds) + 1
         clear = float(self.clear[lo:hi].min()) if hi > lo and lo < len(self.clear) else math.inf
@@ -332,10 +367,17 @@ class StafPlan:
             s = self.anchor[j] + self.cfg.speed * dt
             s = min(s, progress[idx].mean() + self.cfg.max_lead)
             if j > 0 and not self.merging:  # behind the subteam ahead, with room for both formations' depths
-                ahead_depth = _extent(self.slots[j - 1] * self._spacing(j - 1, self.anchor[j - 1]), self.radius)[0]
-                own_depth = _extent(self.slots[j] * self.spacing, self.radius)[0]
+                ahead_depth = self._depth(j - 1, self._spacing(j - 1, self.anchor[j - 1]))
+                own_depth = self._depth(j, self.spacing)
                 s = min(s, self.anchor[j - 1] - (ahead_depth + own_depth) / 2 - self.cfg.follow_gap)
             self.anchor[j] = min(max(self.anchor[j], s), cap)
+
+    def _depth(self, j: int, spacing: float) -> float:
+        """Depth of subteam j along the path: its formation's, lengthened where it turns into a column."""
+        form = _extent(self.slots[j] * spacing, self.radius)[0]
+        column = (len(self.order[j]) - 1) * self.spacing + 2 * self.radius
+        weight = self._file_weight(j)
+        return (1 - weight) * form + weight * max(form, column)
 
     def _place(self) -> None:
         for j, idx in enumerate(self.order):
@@ -347,6 +389,28 @@ class StafPlan:
             c, s = math.cos(heading), math.sin(heading)
             slots = self.slots[j] * spacing
             self.targets[idx] = slots @ np.array([[c, s], [-s, c]]) + point
+            weight = self._file_weight(j)
+            if weight > 0:
+                self.targets[idx] = (1 - weight) * self.targets[idx] + weight * self._column(j)
+
+    def _column(self, j: int) -> np.ndarray:
+        """Subteam j as a column along the path centred on its anchor, at the team's spacing: the robot whose slot is
+        furthest ahead first (then from left to right), so that blending from the formation does not cross ways."""
+        slots = self.slots[j]
+        rank = np.empty(len(slots), dtype=int)
+        rank[np.lexsort((-slots[:, 1], -np.round(slots[:, 0], 6)))] = np.arange(len(slots))
+        offsets = ((len(slots) - 1) / 2 - rank) * self.spacing
+        return self.frame.at(self.anchor[j] + offsets)[0]
+
+    def _file_weight(self, j: int) -> float:
+        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column."""
+        if not self.file_weights[j].any():
+            return 0.0
+        half = (len(self.order[j]) - 1) / 2 * self.spacing
+        lo = int(max(0.0, self.anchor[j] - half) / self.ds)
+        hi = int(max(0.0, self.anchor[j] + half) / self.ds) + 1
+        window = self.file_weights[j][lo:hi]
+        return float(window.max()) if len(window) else 0.0
 
     @property
     def same(self) -> np.ndarray:

@@ -6,20 +6,21 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
+from torch import nn
+
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.config import PolicyConfig
-from stafpipe.learning.dgnn import DGNNPolicy
-from stafpipe.learning.staf_net import StafPolicy
 from stafpipe.paths import package_dir
 from stafpipe.torch_io import load_payload, save_payload
 
 FORMAT = "stafpipe.policy/1"
-POLICIES = {"dgnn": DGNNPolicy, "staf": StafPolicy}
 
 
-def build_policy(method: str, cfg: PolicyConfig) -> DGNNPolicy | StafPolicy:
-    """A fresh policy network of `method` (dgnn or staf)."""
-    return POLICIES[method](cfg)
+def build_policy(method: str, cfg: PolicyConfig) -> nn.Module:
+    """A fresh policy network of the learned method `method` (its adapter names the network)."""
+    from stafpipe.learning.adapters import ADAPTERS
+
+    return ADAPTERS[method].network(cfg)
 
 
 class PolicyCheckpointError(StafpipeError):
@@ -30,13 +31,13 @@ def shipped_policy(method: str) -> Path:
     return package_dir() / "checkpoints" / f"{method}.pt"
 
 
-def save_policy(path: Path, method: str, policy: DGNNPolicy | StafPolicy, made_by: dict[str, Any]) -> Path:
+def save_policy(path: Path, method: str, policy: nn.Module, made_by: dict[str, Any]) -> Path:
     payload = {"format": FORMAT, "method": method, "policy": dataclasses.asdict(policy.cfg),
                "state_dict": policy.state_dict(), "made_by": made_by}
     return save_payload(Path(path), payload)
 
 
-def load_policy(path: str | Path, method: str) -> tuple[DGNNPolicy | StafPolicy, dict[str, Any]]:
+def load_policy(path: str | Path, method: str) -> tuple[nn.Module, dict[str, Any]]:
     """The policy of a checkpoint (`path` empty: the one shipped for `method`), in eval mode, and its record."""
     path = Path(path) if path else shipped_policy(method)
     payload = load_payload(path, PolicyCheckpointError, "policy checkpoint", "train one with `stafpipe train-ppo`")

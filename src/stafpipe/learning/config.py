@@ -62,13 +62,38 @@ class PolicyConfig:
 
 
 @dataclass
+class ImitationConfig:
+    """Warm start before PPO (`learning/ppo.py:imitate`): the network imitates the proportional step to its target,
+    then PPO trains it alone. A teacher for the first minutes only, never part of the trained policy's action."""
+
+    epochs: int = 0
+    """Passes of supervised regression over the teacher's samples; 0: no warm start."""
+    rollouts: int = 1
+    """Batches of `worlds` episodes of `episode_steps` steps driven by the teacher (with `noise`) to collect states;
+    as many again in each DAgger round."""
+    dagger: int = 0
+    """DAgger rounds after the first fit: the network drives (its mean action + `noise`), the teacher labels, all
+    samples are kept and the fit continues (Ross, Gordon and Bagnell, AISTATS 2011)."""
+    teacher: str = "proportional"
+    """`proportional` (a step to the target) or `avoiding` (the same, with the classical methods' approach cap near
+    robots and obstacles), learning/teachers.py."""
+    gain: float = 2.0
+    """The teacher's gain: a step of min(1, gain x distance) of top speed towards the target."""
+    noise: float = 0.3
+    """Standard deviation of the noise added to the teacher's actions while collecting (states off its own way)."""
+    lr: float = 1e-3
+    batch: int = 256
+    """World-steps per minibatch."""
+
+
+@dataclass
 class TrainPPOConfig:
     """PPO on batched worlds (section `train_ppo`). Each iteration resets its worlds and runs one episode of
     `episode_steps` steps in each, so an iteration boundary is an exact resume point."""
 
     method: str = "dgnn"
-    """The policy to train: `dgnn` (the baseline) or `staf` (STAF's intermediate + low level, on the targets of STAF's
-    plan with the high level fixed: one round of App. B.1's alternation)."""
+    """The learned method to train (its adapter, learning/adapters.py): `dgnn` (the baseline) or `staf` (STAF's
+    intermediate + low level, on the targets of STAF's plan with the high level fixed: one round of App. B.1)."""
     iterations: int = 100
     """Training iterations (about 10 min on 2 cores with the defaults; DGNN solves the corridor in about 60)."""
     worlds: int = 16
@@ -76,7 +101,8 @@ class TrainPPOConfig:
     episode_steps: int = 400
     """Control steps per episode (x world.control_dt s); a truncation, bootstrapped from the value."""
     scenarios: list[str] = field(default_factory=lambda: ["corridor"])
-    """Curriculum: each world of each iteration draws one of these built-in scenario names (or paths)."""
+    """Curriculum: each world of each iteration draws one of these: built-in scenario names, scenario files, or
+    directories of scenario files (every `*.yaml` in them, e.g. the `maps/` of `stafpipe generate-maps`)."""
     formations: list[str] = field(default_factory=lambda: ["circle", "wedge", "line"])
     """Curriculum: ... and one of these team formations (STAF Table 1's three); empty: the scenario's own (or the
     `formation` group's)."""
@@ -102,12 +128,22 @@ class TrainPPOConfig:
     threads: int = 2
     reward: RewardConfig = field(default_factory=RewardConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
+    imitation: ImitationConfig = field(default_factory=ImitationConfig)
     plan: PlanConfig = field(default_factory=PlanConfig)
     """method=staf: the execution plan (subteams, sequencing, regroup) the policy is trained on; `method=staf` must
     use the same settings."""
 
     def check(self, key: str = "train_ppo") -> None:
-        require(self.method in ("dgnn", "staf"), f"{key}.method", "must be dgnn or staf", self.method)
+        from stafpipe.learning.adapters import ADAPTERS
+
+        require(self.method in ADAPTERS, f"{key}.method", f"must be one of {sorted(ADAPTERS)}", self.method)
+        im = self.imitation
+        require(im.epochs >= 0 and im.rollouts >= 1 and im.batch >= 1 and im.dagger >= 0, f"{key}.imitation",
+                "epochs >= 0, rollouts >= 1, batch >= 1, dagger >= 0", (im.epochs, im.rollouts, im.batch, im.dagger))
+        require(im.teacher in ("proportional", "avoiding"), f"{key}.imitation.teacher", "must be proportional or "
+                "avoiding", im.teacher)
+        require(im.gain > 0 and im.noise >= 0 and im.lr > 0, f"{key}.imitation", "gain > 0, noise >= 0, lr > 0",
+                (im.gain, im.noise, im.lr))
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)

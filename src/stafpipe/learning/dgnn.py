@@ -50,6 +50,10 @@ class DGNNPolicy(nn.Module):
             e = torch.relu(update(torch.cat([e, agg], dim=-1))) + e
         return e
 
+    def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """Action means (.., n, 2) without the critic: execution only."""
+        return self.actor(self.trunk(own, edge, mask))
+
     def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Action mean (.., n, 2) and value (.., n)."""
         e = self.trunk(own, edge, mask)

@@ -18,10 +18,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from stafpipe.controllers.base import TeamInfo
+from stafpipe.learning.adapters import ADAPTERS, Adapter
 from stafpipe.learning.config import TrainPPOConfig
-from stafpipe.controllers.staf_plan import StafPlan
-from stafpipe.learning.checkpoint import build_policy
-from stafpipe.learning.rollout import Rollout, collect, gae
+from stafpipe.learning.rollout import Rollout, collect, commands, gae
+from stafpipe.learning.teachers import teacher_actions
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.torch_io import save_payload
@@ -72,15 +73,72 @@ def update(policy: torch.nn.Module, opt: torch.optim.Optimizer, ro: Rollout, adv
 
 
 Drawn = tuple[Scenario, np.ndarray, float]
-"""A world's scenario, its team-centre shortest path and its narrowest passage width."""
+"""A world's scenario, its team-centre shortest path (TeamInfo.path) and its narrowest passage width."""
 
 
-def make_plans(tc: TrainPPOConfig, drawn: list[Drawn], worlds: Worlds, divide: Callable | None) -> list[StafPlan] | None:
-    """method=staf: a fresh STAF plan per world (after `worlds.reset`, which sets the goals); None for dgnn."""
-    if divide is None:
-        return None
-    return [StafPlan(tc.plan, sc, sc.template(), worlds.goal[w], path, eta, divide)
+def teams_of(drawn: list[Drawn], worlds: Worlds) -> list[TeamInfo]:
+    """What each world's controller knows at the start of an episode (after `worlds.reset`), as in `eval`."""
+    return [TeamInfo(sc, worlds.pos[w].copy(), worlds.goal[w].copy(), sc.template(), path, eta)
             for w, (sc, path, eta) in enumerate(drawn)]
+
+
+def _teacher_samples(policy: torch.nn.Module | None, adapter: Adapter, drawn: list[Drawn], world_cfg: WorldConfig,
+                     sensing: SensingConfig, tc: TrainPPOConfig, rng: np.random.Generator) -> tuple[torch.Tensor, ...]:
+    """One batch of episodes with the teacher's action as the label of every state: driven by the teacher itself
+    (`policy` None) or by the network's mean action (DAgger), with Gaussian action noise."""
+    im = tc.imitation
+    worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
+    obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, len(drawn))])
+    adapter.begin(teams_of(drawn, worlds), teacher=True)
+    own, edge, mask, target = [], [], [], []
+    for _ in range(tc.episode_steps):
+        f = adapter.step(obs, world_cfg.control_dt).features
+        act = teacher_actions(im.teacher, adapter.teacher_aim() - obs.position, obs, worlds.robot.radius,
+                              worlds.robot.max_speed, im.gain)
+        own.append(torch.from_numpy(f.own)), edge.append(torch.from_numpy(f.edge)), mask.append(torch.from_numpy(f.mask))
+        target.append(torch.from_numpy(act.astype(np.float32)))
+        drive = act
+        if policy is not None:
+            with torch.no_grad():
+                drive = policy.act(own[-1], edge[-1], mask[-1]).numpy().astype(float)
+        obs, _ = worlds.step(commands(drive + rng.normal(0.0, im.noise, act.shape), worlds.heading,
+                                      worlds.robot.max_speed))
+    return tuple(torch.cat(x) for x in (own, edge, mask, target))
+
+
+def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random.Generator, int], list[Drawn]],
+            world_cfg: WorldConfig, sensing: SensingConfig, tc: TrainPPOConfig, seed: int) -> dict[str, float]:
+    """Warm start (`train_ppo.imitation.epochs` > 0): the network learns to imitate a hand-made low level (the
+    teacher, learning/teachers.py) by supervised regression of the action mean, first on states the teacher visits,
+    then (`imitation.dagger` rounds, DAgger: Ross, Gordon and Bagnell, AISTATS 2011) on states the network itself
+    visits, labelled by the teacher, all samples kept. The teacher may see more than the network
+    (`Adapter.teacher_aim`: for STAF, the targets of the geometrically adapted plan, while the network sees the nominal
+    ones and must infer the adaptation from what it senses). The teacher is then gone: PPO trains the network alone,
+    a_i = psi(f_i) as printed (docs/staf.md)."""
+    im = tc.imitation
+    rng = np.random.default_rng([seed, 7])
+    opt = torch.optim.Adam(policy.parameters(), lr=im.lr)
+    gen = torch.Generator().manual_seed(seed)
+    sets: list[tuple[torch.Tensor, ...]] = []  # one per batch of episodes: its worlds share the team size
+    loss = torch.zeros(())
+    for round_ in range(1 + im.dagger):
+        driver = None if round_ == 0 else policy
+        sets += [_teacher_samples(driver, adapter, draw(rng, tc.worlds), world_cfg, sensing, tc, rng)
+                 for _ in range(im.rollouts)]
+        for _ in range(im.epochs):
+            for k in torch.randperm(len(sets), generator=gen).tolist():
+                b_own, b_edge, b_mask, b_target = sets[k]
+                order = torch.randperm(len(b_own), generator=gen)
+                for start in range(0, len(order), im.batch):
+                    mb = order[start : start + im.batch]
+                    loss = ((policy.act(b_own[mb], b_edge[mb], b_mask[mb]) - b_target[mb]) ** 2).sum(-1).mean()
+                    opt.zero_grad()
+                    loss.backward()
+                    opt.step()
+        log.info("imitation round %d (%s teacher): %d batches, loss %.4f", round_, im.teacher, len(sets),
+                 float(loss.detach()))
+    samples = sum(x[0].shape[0] * x[0].shape[1] for x in sets)
+    return {"imitation/loss": float(loss.detach()), "imitation/samples": float(samples)}
 
 
 def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[Drawn]],
@@ -90,16 +148,15 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
     """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state."""
     torch.set_num_threads(tc.threads)
     torch.manual_seed(seed)
-    policy = build_policy(tc.method, tc.policy)
-    divide = None
-    if tc.method == "staf":  # App. B.1: the high level is trained first and fixed while PPO trains phi and psi
-        from stafpipe.highlevel.infer import divider
-
-        divide = divider(tc.plan.high_checkpoint)
-    opt = torch.optim.Adam(policy.parameters(), lr=tc.lr, eps=1e-5)
-    gen = torch.Generator().manual_seed(seed)
+    adapter = ADAPTERS[tc.method](tc.policy, tc.reward, tc.plan, sensing.radius)
+    policy = adapter.network(tc.policy)
     history: list[dict[str, float]] = []
     start = 0
+    warm: dict[str, float] = {}
+    if resume_from is None and tc.imitation.epochs > 0:
+        warm = imitate(policy, adapter, draw_scenarios, world_cfg, sensing, tc, seed)
+    opt = torch.optim.Adam(policy.parameters(), lr=tc.lr, eps=1e-5)
+    gen = torch.Generator().manual_seed(seed)
     if resume_from is not None:
         state = torch.load(resume_from, map_location="cpu", weights_only=True)
         policy.load_state_dict(state["policy"])
@@ -115,8 +172,8 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         drawn = draw_scenarios(rng, tc.worlds)  # (scenario, its team-centre shortest path, eta) per world
         worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
         obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, tc.worlds)])
-        ro, stats = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [d[1] for d in drawn],
-                            plans=make_plans(tc, drawn, worlds, divide))
+        adapter.begin(teams_of(drawn, worlds))
+        ro, stats = collect(policy, adapter, worlds, obs, tc, tolerance)
         collected = time.perf_counter()
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
         losses = update(policy, opt, ro, adv, ret, tc, gen)
@@ -129,9 +186,11 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         if tc.eval_every and ((it + 1) % tc.eval_every == 0 or it + 1 == tc.iterations):
             worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)  # same scenarios, fixed evaluation seeds
             obs = worlds.reset([EVAL_SEED + w for w in range(tc.worlds)])
-            _, ev = collect(policy, worlds, obs, tc, tolerance, sensing.radius, [d[1] for d in drawn],
-                            deterministic=True, plans=make_plans(tc, drawn, worlds, divide))
+            adapter.begin(teams_of(drawn, worlds))
+            _, ev = collect(policy, adapter, worlds, obs, tc, tolerance, deterministic=True)
             row.update({f"eval/{k}": v for k, v in ev.items()})
+        if it == 0:
+            row.update(warm)
         history.append(row)
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")
         if (it + 1) % tc.checkpoint_every == 0 or it + 1 == tc.iterations:

@@ -20,6 +20,13 @@ from stafpipe.learning.config import PolicyConfig
 from stafpipe.learning.features import STAF_EDGE
 
 
+def proportional_step(own: torch.Tensor, gain: float) -> torch.Tensor:
+    """(.., 2) a step towards the target at min(1, gain x distance) of top speed; `own[..., :2]` is the robot-frame
+    target vector of both policies' features (the method with no learned low level, and the imitation teacher)."""
+    step = gain * own[..., :2]
+    return step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
+
+
 class StafPolicy(nn.Module):
     """phi (W^z, W^f) + psi, and a critic head (own embedding and the team's mean: a centralized critic)."""
 
@@ -59,8 +66,7 @@ class StafPolicy(nn.Module):
     def _mean(self, f: torch.Tensor, own: torch.Tensor) -> torch.Tensor:
         mean = self.psi(f)
         if self.cfg.prior_gain > 0:  # residual on a proportional step to the target (docs/staf.md, decision 5)
-            step = self.cfg.prior_gain * own[..., :2]
-            mean = mean + step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
+            mean = mean + proportional_step(own, self.cfg.prior_gain)
         return mean
 
     def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

@@ -28,7 +28,7 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
     ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
 }
 METRICS = ("sr", "tt", "cfi_0.5", "cfi_0.1", "cfi_0.01", "tt_ratio", "collisions")
-GROUP = ["run", "method", "formation", "n", "drive", "scenario", "paper_cell"]
+GROUP = ["run", "method", "label", "formation", "n", "drive", "scenario", "paper_cell"]
 
 
 def _mean_ci(values: pd.Series) -> tuple[float, float]:
@@ -43,6 +43,8 @@ def _mean_ci(values: pd.Series) -> tuple[float, float]:
 def summary_table(results: pd.DataFrame, prefix: str = "") -> pd.DataFrame:
     """Mean and CI of each metric per group; `prefix` = "sub1_" etc. reads a subteam's columns (Table 2)."""
     rows = []
+    if "label" in results:  # runs made before eval.label existed have none
+        results = results.assign(label=results["label"].fillna(""))
     for key, group in results.groupby([c for c in GROUP if c in results], sort=False):
         row = dict(zip([c for c in GROUP if c in results], key if isinstance(key, tuple) else (key,), strict=True))
         row["episodes"] = len(group)
@@ -70,7 +72,9 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in table.iterrows():
         eta = r.get("eta", math.nan)
-        papers_cell = r.get("n") == 10 and bool(r.get("paper_cell", False))  # the paper's map and team size
+        label = r.get("label", "")
+        labelled = isinstance(label, str) and bool(label)  # a variant of ours (e.g. m-auto): not the paper's setup
+        papers_cell = r.get("n") == 10 and bool(r.get("paper_cell", False)) and not labelled  # the paper's map, team
         ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and papers_cell else None
         cells = [_cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
                  _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan))]
@@ -80,7 +84,8 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         cells += [_cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
                   _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
                   f"{100 * r['all_succeeded']:.0f} %"]
-        lines.append("| " + " | ".join([str(r["method"]), str(r.get("scenario", "")), _cell(eta, math.nan, 1, 2),
+        method = f"{r['method']} ({label})" if labelled else str(r["method"])
+        lines.append("| " + " | ".join([method, str(r.get("scenario", "")), _cell(eta, math.nan, 1, 2),
                                         str(r["formation"]), str(r.get("n", "")), str(r.get("drive", "")),
                                         str(r["episodes"]), *cells]) + " |")
     if paper:

@@ -87,7 +87,7 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
         controller = make_controller(method_cfg)
         values = run_episode(scenario, geometry, controller, method_cfg.name, seed, world_cfg,
                              sensing, ev.goal_tolerance, ev.cfi_margin, log_path)
-        rows.append({"episode": k, "seed": seed, "method": method_cfg.name, "scenario": scenario.name,
+        rows.append({"episode": k, "seed": seed, "method": method_cfg.name, "label": ev.label, "scenario": scenario.name,
                      "formation": scenario.spec.team.formation, "n": scenario.spec.team.n,
                      "drive": scenario.spec.robot.drive, **values, **controller.episode_stats()})
         if log_path:

@@ -172,8 +172,13 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
         if pc.kind == "table":  # Fig. 8(e) beside the table
             from stafpipe.plots.staf_tables import cfi_sigma_figure
 
-            outputs += save_figure(cfi_sigma_figure(pd.read_csv(out_dir / "table.csv")), out_dir / "cfi_vs_sigma",
-                                   pc.formats, pc.dpi)
+            table = pd.read_csv(out_dir / "table.csv", keep_default_na=False, na_values=[""])
+            outputs += save_figure(cfi_sigma_figure(table), out_dir / "cfi_vs_sigma", pc.formats, pc.dpi)
+            if "label" in table and table["label"].astype(str).str.len().gt(0).any():  # variants: the levels figure
+                from stafpipe.plots.levels import levels_figure
+
+                outputs += save_figure(levels_figure(table.fillna({"label": ""})), out_dir / "levels", pc.formats,
+                                       pc.dpi)
         print("\n".join(str(p) for p in outputs))
         return outputs
     draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures,

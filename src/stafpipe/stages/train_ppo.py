@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
+from tqdm import tqdm
 
 from stafpipe.errors import StafpipeError
 from stafpipe.io import save_figure, write_table
@@ -45,16 +46,30 @@ def resume_state(out_dir: Path, digest: str) -> Path | None:
     return None
 
 
-def _path_and_width(scenario: Scenario, method: str) -> tuple[np.ndarray, float]:
-    """The team centre's shortest path (for staf: through the middle of the passages, as `method=staf` plans) and the
-    narrowest passage on the way (as an eval episode computes them)."""
-    from stafpipe.episode import centred_path, episode_context
+BUILT_IN_TEST_MAPS = {"corridor", "bridge", "doorway", "narrowing", "multi_passage", "bollards", "forest"}
+"""STAF's maps (conf/scenario/): what learned methods are tested on, never trained on (docs/decisions.md)."""
+
+
+def _path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
+    """The team centre's shortest path (TeamInfo.path) and the narrowest passage on the way, as an eval episode
+    computes them."""
+    from stafpipe.episode import episode_context
     from stafpipe.geometry import Geometry
     from stafpipe.sensing import SensingConfig
 
-    geometry = Geometry(scenario)
-    ctx, path = episode_context(scenario, geometry, SensingConfig(), 0.3, 0.0)
-    return (centred_path(scenario, geometry, ctx.passage_width) if method == "staf" else path), ctx.passage_width
+    ctx, path = episode_context(scenario, Geometry(scenario), SensingConfig(), 0.3, 0.0)
+    return path, ctx.passage_width
+
+
+def scenario_files(entry: str) -> list[str]:
+    """A `train_ppo.scenarios` entry as scenario names or files: a directory stands for every `*.yaml` in it."""
+    path = Path(entry)
+    if path.is_dir():
+        files = sorted(str(p) for p in path.glob("*.yaml"))
+        if not files:
+            raise StafpipeError(f"train_ppo.scenarios: directory {entry} holds no scenario *.yaml file")
+        return files
+    return [entry]
 
 
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
@@ -71,22 +86,26 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     tc.check()
     world_cfg: WorldConfig = OmegaConf.to_object(cfg.world)  # type: ignore[assignment]
     sensing: SensingConfig = OmegaConf.to_object(cfg.sensing)  # type: ignore[assignment]
-    pool = [with_overrides(load_named_scenario(name), cfg) for name in tc.scenarios]
+    pool = [with_overrides(load_named_scenario(name), cfg) for entry in tc.scenarios for name in scenario_files(entry)]
     if tc.formations:  # every scenario with every formation of the curriculum
         pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
                 for s in pool for kind in tc.formations]
     if tc.team_sizes:
         pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, n=n)))
                 for s in pool for n in tc.team_sizes]
-    if any(s.spec.robot != pool[0].spec.robot for s in pool):
-        raise StafpipeError("train_ppo.scenarios: all need the same robot (set the `robot` group to make them equal)")
-    drawn = [(s, *_path_and_width(s, tc.method)) for s in pool]
-    sizes = sorted({s.spec.team.n for s in pool})
+    test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
+    if test_maps:
+        log.warning("train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps)
+    drawn = [(s, *_path_and_width(s)) for s in tqdm(pool, desc="train-ppo: maps", unit="map", disable=None)]
+    # a batch of worlds shares the team size and the robot: one such group per iteration
+    groups: dict[str, list] = {}
+    for d in drawn:
+        groups.setdefault(f"{d[0].spec.team.n}|{d[0].spec.robot}", []).append(d)
+    keys = sorted(groups)
 
     def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray, float]]:
-        # one team size per iteration (a batch of worlds shares n); scenarios of that size drawn uniformly
-        n = sizes[int(rng.integers(len(sizes)))] if len(sizes) > 1 else sizes[0]
-        same = [d for d in drawn if d[0].spec.team.n == n]
+        # one group per iteration; its scenarios drawn uniformly
+        same = groups[keys[int(rng.integers(len(keys)))] if len(keys) > 1 else keys[0]]
         return [same[int(k)] for k in rng.integers(len(same), size=count)]
 
     plain = copy.deepcopy(cfg)
@@ -103,6 +122,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     policy, history = train_ppo(tc, draw, world_cfg, sensing, float(cfg.eval.goal_tolerance), int(cfg.seed), out_dir,
                                 digest, resume_from, on_iteration)
     made_by = {"train_ppo": OmegaConf.to_container(cfg.train_ppo, resolve=True), "seed": int(cfg.seed),
+               "training_maps": sorted({s.name for s in pool}),
                "commit": commit(), "iterations": len(history), "final": history[-1] if history else {}}
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
     outputs += write_table(pd.DataFrame(history), curves)

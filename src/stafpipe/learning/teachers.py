@@ -1,0 +1,30 @@
+"""Hand-made low levels: the imitation teachers of the warm start (learning/ppo.py:imitate) and, in `method=staf`
+(`method.low_level`), the method with its learned low level removed, for the ablation of docs/staf.md.
+
+- `proportional`: a step towards the target at min(1, gain x distance) of top speed (staf_net.proportional_step).
+- `avoiding`: the same step, then the classical methods' collision avoidance (controllers/base.py:limit_approach):
+  towards a robot or obstacle closer than 0.35 m the approach speed is capped at 2 x (gap - 0.02 m), as in `method=lf`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stafpipe.controllers.base import limit_approach
+from stafpipe.sensing import Observation
+
+TEACHERS = ("proportional", "avoiding")
+AVOID_DISTANCE, AVOID_GAIN = 0.35, 2.0  # as method=lf's defaults
+
+
+def teacher_actions(kind: str, to_aim: np.ndarray, obs: Observation, radius: float, max_speed: float,
+                    gain: float) -> np.ndarray:
+    """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
+    vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs`."""
+    length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
+    world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
+    if kind == "avoiding":
+        world = np.stack([limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN)
+                          for w in range(len(world))])
+    c, s = np.cos(obs.heading), np.sin(obs.heading)
+    return np.stack([c * world[..., 0] + s * world[..., 1], -s * world[..., 0] + c * world[..., 1]], axis=-1) / max_speed

@@ -1,0 +1,164 @@
+"""One path for learned methods: adapters shared by the PPO rollout and the evaluation controller, the imitation warm
+start, the hand-made low levels of the ablation, and training on generated map directories."""
+
+from __future__ import annotations
+
+import inspect
+import re
+
+import numpy as np
+import pytest
+import torch
+
+import stafpipe.learning.ppo as ppo
+import stafpipe.learning.rollout as rollout
+import stafpipe.stages.train_ppo as train_stage
+from conftest import job_dirs
+from stafpipe.controllers import make_controller
+from stafpipe.controllers.base import TeamInfo
+from stafpipe.controllers.staf import StafMethodConfig
+from stafpipe.episode import episode_context
+from stafpipe.geometry import Geometry
+from stafpipe.launch import launch
+from stafpipe.learning.adapters import ADAPTERS
+from stafpipe.learning.checkpoint import load_policy
+from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
+from stafpipe.learning.teachers import teacher_actions
+from stafpipe.sensing import SensingConfig
+from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.world import WorldConfig, Worlds
+
+
+def test_trainer_has_no_method_name_branches() -> None:
+    """A new learned method is a network, an adapter and a config: the trainer never names one."""
+    for module in (ppo, rollout, train_stage):
+        assert not re.search(r"""["'](staf|dgnn)["']""", inspect.getsource(module)), module.__name__
+    assert set(ADAPTERS) == {"dgnn", "staf"}
+
+
+def _team(sc, worlds: Worlds, w: int = 0) -> TeamInfo:
+    ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
+    return TeamInfo(sc, worlds.pos[w].copy(), worlds.goal[w].copy(), sc.template(), path, ctx.passage_width)
+
+
+@pytest.mark.parametrize("method", ["dgnn", "staf"])
+def test_controller_acts_as_the_rollout_adapter_does(method) -> None:
+    """The evaluation controller and the training rollout drive the same network through the same adapter: the
+    controller's command equals the policy mean on the adapter's batched features, step after step."""
+    sc = load_named_scenario("corridor")
+    cfg = {"dgnn": lambda: __import__("stafpipe.controllers.dgnn", fromlist=["x"]).DGNNConfig(),
+           "staf": StafMethodConfig}[method]()
+    ctrl = make_controller(cfg)
+    worlds = Worlds([sc], SensingConfig())
+    obs = worlds.reset([3])
+    team = _team(sc, worlds)
+    ctrl.reset(team)
+    adapter = ADAPTERS[method](ctrl.policy.cfg, TrainPPOConfig().reward, getattr(cfg, "plan", None), 2.0)
+    adapter.begin([team])
+    for _ in range(60):
+        f = adapter.step(obs, 0.1 if worlds.time[0] > 0 else 0.0).features
+        with torch.no_grad():
+            mean, _ = ctrl.policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
+        command = ctrl.act(obs.world(0))
+        expect = rollout.commands(mean.numpy(), worlds.heading, worlds.robot.max_speed)[0]
+        assert np.allclose(command, expect, atol=1e-5)
+        obs, _ = worlds.step(command[None])
+
+
+def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -> None:
+    sc = load_named_scenario("corridor")
+    worlds = Worlds([sc], SensingConfig())
+    obs = worlds.reset([0])
+    aim = np.zeros_like(obs.position)
+    aim[..., 0] = 0.2  # 0.2 m ahead: the proportional step is 0.4 of top speed (gain 2)
+    act = teacher_actions("proportional", aim, obs, 0.2, 1.0, 2.0)
+    assert np.allclose(act[..., 0], 0.4) and np.allclose(act[..., 1], 0.0)
+    worlds.pos[0, 0] = [12.0 - 0.2 - 0.05, 6.0]  # robot 0 5 cm in front of the corridor's left wall face (x = 12)
+    obs = worlds.observe()
+    far = np.zeros_like(obs.position)
+    far[..., 0] = 5.0
+    capped = teacher_actions("avoiding", far, obs, 0.2, 1.0, 2.0)
+    free = teacher_actions("proportional", far, obs, 0.2, 1.0, 2.0)
+    assert free[0, 0, 0] == pytest.approx(1.0)
+    gap = obs.obstacle_distance[0, 0]
+    assert capped[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 2.0 * (gap - 0.02) + 1e-9
+
+
+@pytest.mark.slow
+def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
+    sc = load_named_scenario("corridor")
+    ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
+    tc = TrainPPOConfig(method="staf", worlds=2, episode_steps=30, policy=PolicyConfig(hidden=32),
+                        imitation=ImitationConfig(epochs=200, rollouts=1, teacher="proportional", noise=0.0))
+    adapter = ADAPTERS["staf"](tc.policy, tc.reward, tc.plan, 2.0)
+    torch.manual_seed(0)
+    policy = adapter.network(tc.policy)
+    worlds = Worlds([sc, sc], SensingConfig())
+    obs = worlds.reset([5, 6])
+    adapter.begin([_team(sc, worlds, 0), _team(sc, worlds, 1)])
+    f = adapter.step(obs, 0.0).features
+    want = teacher_actions("proportional", adapter.teacher_aim() - obs.position, obs, 0.2, 1.0, 2.0)
+
+    def error() -> float:
+        with torch.no_grad():
+            got = policy.act(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask)).numpy()
+        return float(np.abs(got - want).mean())
+
+    before = error()
+    stats = ppo.imitate(policy, adapter, lambda rng, k: [(sc, path, ctx.passage_width)] * k, WorldConfig(),
+                        SensingConfig(), tc, seed=0)
+    assert stats["imitation/samples"] == 2 * 30 * 10
+    assert error() < min(0.1, before / 4)  # the network now does roughly what the teacher does
+
+
+@pytest.mark.slow
+def test_staf_ablation_low_levels_run_and_are_refused_when_unknown(workdir) -> None:
+    for low in ("proportional", "avoiding"):
+        assert launch("eval", ["method=staf", f"method.low_level={low}", "method.plan.adapt=geometric",
+                               "eval.episodes=1", "scenario.time_limit=4", f"eval.label={low}"]) == 0
+    assert launch("eval", ["method=staf", "method.low_level=magic", "eval.episodes=1"]) == 2
+    assert launch("eval", ["method=staf", "method.plan.adapt=squeeze", "eval.episodes=1"]) == 2
+    runs = job_dirs(workdir)
+    assert len(runs) == 2
+    import pandas as pd
+
+    labels = sorted(pd.read_parquet(r / "results.parquet").label.iloc[0] for r in runs)
+    assert labels == ["avoiding", "proportional"]
+
+
+@pytest.mark.slow
+def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> None:
+    assert launch("generate-maps", ["seed=5", "maps.count=2", "maps.team_sizes=[4,4]", "maps.drives=[holonomic]",
+                                    "hydra.run.dir=maps"]) == 0
+    assert launch("train-ppo", ["train_ppo.method=staf", "train_ppo.scenarios=[maps/maps]", "train_ppo.formations=[]",
+                                "train_ppo.iterations=1", "train_ppo.worlds=2", "train_ppo.episode_steps=6",
+                                "train_ppo.policy.hidden=16", "train_ppo.imitation.epochs=1",
+                                "hydra.run.dir=train"]) == 0
+    policy, made_by = load_policy(workdir / "train" / "policy.pt", "staf")
+    assert made_by["training_maps"] == sorted(made_by["training_maps"]) and len(made_by["training_maps"]) == 2
+    assert all(name.startswith("gen5_") for name in made_by["training_maps"])
+    assert launch("train-ppo", ["train_ppo.scenarios=[maps/nothing_here]", "train_ppo.iterations=1"]) == 2
+
+
+def test_plot_table_draws_labelled_variants_side_by_side(workdir) -> None:
+    """`eval.label` keeps variants of one method apart: one table row each, no paper numbers beside a variant, and the
+    levels figure (SR, collisions, CFI per map and variant)."""
+    import pandas as pd
+
+    row = {"method": "staf", "formation": "line", "n": 10, "drive": "holonomic", "scenario": "doorway", "sr": 1.0,
+           "tt": 30.0, "cfi_0.5": 0.8, "cfi_0.1": 0.7, "cfi_0.01": 0.7, "tt_ratio": 1.4, "collisions": 0.0, "eta": 1.3}
+    dirs = []
+    for label, sr in (("a-no-learning", 0.5), ("b-learned", 1.0)):
+        d = workdir / label
+        d.mkdir()
+        pd.DataFrame([{**row, "label": label, "sr": sr}] * 3).to_parquet(d / "results.parquet")
+        dirs.append(str(d))
+    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{','.join(dirs)}]"]) == 0
+    [run] = [d for d in job_dirs(workdir) if (d / "table.md").is_file()]
+    text = (run / "table.md").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| staf")]
+    assert len(rows) == 2 and "staf (a-no-learning)" in rows[0] and "staf (b-learned)" in rows[1]
+    assert not any("[" in r for r in rows)  # the paper's numbers are not beside a variant
+    assert (run / "levels.png").is_file()
+    table = pd.read_csv(run / "table.csv")
+    assert sorted(table.sr) == [0.5, 1.0]
