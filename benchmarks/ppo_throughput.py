@@ -12,12 +12,13 @@ import time
 
 import torch
 
+from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
-from stafpipe.learning.ppo import update
+from stafpipe.learning.ppo import teams_of, update
 from stafpipe.learning.rollout import collect, gae
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
 from stafpipe.world import Worlds
 
 
@@ -28,6 +29,7 @@ def main() -> None:
     torch.set_num_threads(2)
     torch.manual_seed(0)
     corridor = load_named_scenario("corridor")
+    path, eta = path_and_width(corridor)
     print(f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | {'overall robot-steps/s':>21}")
     print("-" * 76)
     for b in (4, 16, 64):
@@ -36,8 +38,10 @@ def main() -> None:
         opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
         worlds = Worlds([corridor] * b, SensingConfig())
         obs = worlds.reset(list(range(b)))
+        adapter = ADAPTERS["dgnn"](tc.policy, tc.reward, None, 2.0)
+        adapter.begin(teams_of([(corridor, path, eta)] * b, worlds))
         start = time.perf_counter()
-        ro, _ = collect(policy, worlds, obs, tc, 0.3, 2.0)
+        ro, _ = collect(policy, adapter, worlds, obs, tc, 0.3)
         rollout = time.perf_counter() - start
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
         start = time.perf_counter()

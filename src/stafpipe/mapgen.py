@@ -2,8 +2,9 @@
 several parallel gaps, bollard rows and obstacle fields, each with a random team (size, formation, drive).
 
 STAF trains its policy in simulation and tests it on corridors, bridges, doorways and outdoor bollards/forests (STAF
-Sec. 4, App. F). The built-in maps of `conf/scenario/` are test maps and are never trained on; a learned method trains
-on these generated maps instead, so that what it learned is not the shape of the map it is scored on (docs/decisions.md).
+Sec. 4, App. F). The built-in maps of `conf/scenario/` are test maps and are never trained on; a learned method
+trains on these generated maps instead, so that what it learned is not the shape of the map it is scored on
+(docs/decisions.md).
 
 Every map is a plain scenario (`scenario.ScenarioConfig`), written as a scenario YAML that `scenario.path=` reads. The
 team travels along +x from a free start area to a free goal area; the obstacles lie between them. A map is kept only if

@@ -95,7 +95,8 @@ def _teacher_samples(policy: torch.nn.Module | None, adapter: Adapter, drawn: li
         f = adapter.step(obs, world_cfg.control_dt).features
         act = teacher_actions(im.teacher, adapter.teacher_aim() - obs.position, obs, worlds.robot.radius,
                               worlds.robot.max_speed, im.gain)
-        own.append(torch.from_numpy(f.own)), edge.append(torch.from_numpy(f.edge)), mask.append(torch.from_numpy(f.mask))
+        for store, x in ((own, f.own), (edge, f.edge), (mask, f.mask)):
+            store.append(torch.from_numpy(x))
         target.append(torch.from_numpy(act.astype(np.float32)))
         drive = act
         if policy is not None:
@@ -179,7 +180,8 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         losses = update(policy, opt, ro, adv, ret, tc, gen)
         done = time.perf_counter()
         samples = ro.rewards.numel()
-        row = {"iteration": it + 1, "robot_steps": float((it + 1) * samples),
+        done_before = history[-1]["robot_steps"] if history else 0.0  # team sizes differ between iterations
+        row = {"iteration": it + 1, "robot_steps": float(done_before + samples),
                **{f"charts/{k}": v for k, v in stats.items()}, **losses,
                "charts/fps": samples / (done - began), "charts/rollout_fps": samples / (collected - began),
                "charts/update_seconds": done - collected, "charts/log_std": float(policy.log_std.detach().mean())}

@@ -27,4 +27,5 @@ def teacher_actions(kind: str, to_aim: np.ndarray, obs: Observation, radius: flo
         world = np.stack([limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN)
                           for w in range(len(world))])
     c, s = np.cos(obs.heading), np.sin(obs.heading)
-    return np.stack([c * world[..., 0] + s * world[..., 1], -s * world[..., 0] + c * world[..., 1]], axis=-1) / max_speed
+    robot = np.stack([c * world[..., 0] + s * world[..., 1], -s * world[..., 0] + c * world[..., 1]], axis=-1)
+    return robot / max_speed

@@ -1,8 +1,8 @@
 """`stafpipe generate-maps`: seeded procedural training maps (stafpipe.mapgen), one scenario YAML per map.
 
-Writes `maps/map_NNNN.yaml` (map k of the run, its scenario named `gen<seed>_<k>-<family>`; each readable by `scenario.path=` and usable as a `train_ppo.scenarios` entry, or the whole
-`maps/` directory as one entry) and `maps.parquet/.csv` (one row per map: name, family, team size, formation, drive,
-world size, obstacle count).
+Writes `maps/map_NNNN.yaml` (map k of the run, its scenario named `gen<seed>_<k>-<family>`; each readable by
+`scenario.path=` and usable as a `train_ppo.scenarios` entry, or the whole `maps/` directory as one entry) and
+`maps.parquet/.csv` (one row per map: file, name, family, team size, formation, drive, world size, obstacle count).
 """
 
 from __future__ import annotations
@@ -27,7 +27,8 @@ def run_generate_maps(cfg: DictConfig, out_dir: Path) -> list[Path]:
     for k, spec in enumerate(specs):
         text = OmegaConf.to_yaml(OmegaConf.structured(spec))
         outputs.append(atomic_write(out_dir / "maps" / f"map_{k:04d}.yaml", lambda tmp, t=text: tmp.write_text(t)))
-        rows.append({"file": f"maps/map_{k:04d}.yaml", "name": spec.name, "family": spec.name.rsplit("-", 1)[-1], "n": spec.team.n,
+        rows.append({"file": f"maps/map_{k:04d}.yaml", "name": spec.name, "family": spec.name.rsplit("-", 1)[-1],
+                     "n": spec.team.n,
                      "formation": spec.team.formation, "drive": spec.robot.drive, "length": spec.world.xmax,
                      "height": spec.world.ymax, "obstacles": len(spec.obstacles)})
     outputs += write_table(pd.DataFrame(rows), out_dir / "maps")

@@ -50,7 +50,7 @@ BUILT_IN_TEST_MAPS = {"corridor", "bridge", "doorway", "narrowing", "multi_passa
 """STAF's maps (conf/scenario/): what learned methods are tested on, never trained on (docs/decisions.md)."""
 
 
-def _path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
+def path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
     """The team centre's shortest path (TeamInfo.path) and the narrowest passage on the way, as an eval episode
     computes them."""
     from stafpipe.episode import episode_context
@@ -95,8 +95,9 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
                 for s in pool for n in tc.team_sizes]
     test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
     if test_maps:
-        log.warning("train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps)
-    drawn = [(s, *_path_and_width(s)) for s in tqdm(pool, desc="train-ppo: maps", unit="map", disable=None)]
+        log.warning("train_ppo.scenarios include the built-in test maps %s: results on them are not held out",
+                    test_maps)
+    drawn = [(s, *path_and_width(s)) for s in tqdm(pool, desc="train-ppo: maps", unit="map", disable=None)]
     # a batch of worlds shares the team size and the robot: one such group per iteration
     groups: dict[str, list] = {}
     for d in drawn:
