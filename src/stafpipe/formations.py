@@ -3,12 +3,14 @@
 Frame convention: a formation's slots are given in its own frame, x pointing where the formation heads and y to its
 left, with the centroid at the origin. `place` rotates them to a heading and moves them to a centre.
 
-- circle, wedge, line: STAF (000_f89c49495043d27c.txt, Section 4 and Appendix D). The line is abreast, i.e.
+- circle, wedge, line: STAF (Section 4 and Appendix D). The line is abreast, i.e.
   perpendicular to the heading: it is the formation whose width forces a split in a corridor (STAF Section 4, 9 robots
   in line split into three subteams). The wedge is a V whose apex angle is 90 degrees: STAF Appendix D scores a wedge by
   |2 L_m - L_b| / L_b, which is zero exactly when the altitude is half the base, i.e. a right angle at the apex.
-- square, t: Zhu et al. 2019 (001_9e11512086778daf.txt, Section VI, square and T templates; 4x4 grids of 16 robots).
-- v with any apex angle: Cezayirli & Kerestecioglu (004_93a60c7b7c4f63bc.txt, simulation 2, a 120 degree V).
+- square, t: Zhu, Juhl, Ferranti and Alonso-Mora, ICRA 2019 (Section VI, square and T templates; 4x4 grids of 16
+  robots).
+- v with any apex angle: Cezayirli and Kerestecioglu, "A Non-Communicating Multi-Robot System with Switchable
+  Formations" (simulation 2, a 120 degree V).
 """
 
 from __future__ import annotations

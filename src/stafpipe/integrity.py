@@ -1,4 +1,4 @@
-"""Formation integrity epsilon of STAF's CFI metric (000_f89c49495043d27c.txt, Appendix D), per formation type.
+"""Formation integrity epsilon of STAF's CFI metric (STAF, Appendix D), per formation type.
 
 As printed, two of the formulas score a perfect formation badly (circle: 0; line: 1 - 1/(n-1)); we use the evident
 intent, a relative deviation from the ideal, and give printed vs used side by side in docs/metrics.md. Every score is

@@ -1,6 +1,6 @@
 """Episode metrics: pure functions of a recorded trajectory, the same for a live run and a run read back from MCAP.
 
-STAF (000_f89c49495043d27c.txt) Section 4: SR (robots at their goal without any collision), TT (time until the whole
+STAF Section 4: SR (robots at their goal without any collision), TT (time until the whole
 team is at its goal), CFI (Appendix D; thresholds sigma = 0.5, 0.1, 0.01, w = 0.5). Cezayirli & Kerestecioglu Fig. 4:
 number of communication links over time; we add the algebraic connectivity lambda2 of the same graph. Where STAF's
 printed CFI is ill-posed we use its evident intent (docs/metrics.md).

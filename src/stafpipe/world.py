@@ -36,9 +36,9 @@ class WorldConfig:
     control_dt: float = 0.1
     """Control period in seconds (one `step`)."""
     substeps: int = 4
-    """Physics substeps per control period: 4 keep robot-robot overlaps to a few cm (PERFORMANCE-NOTES)."""
+    """Physics substeps per control period: 4 keep robot-robot overlaps to a few cm (measured on the 2-core development machine)."""
     collision_slop: float = 0.005
-    """pymunk's allowed overlap; the default 0.1 lets robots leave walled boxes (PERFORMANCE-NOTES)."""
+    """pymunk's allowed overlap; the default 0.1 lets robots leave walled boxes (measured on the 2-core development machine)."""
     start_noise: float = 0.05
     """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
 

@@ -1,5 +1,6 @@
-"""`method=cezayirli`: non-communicating robots with switchable formations (Cezayirli & Kerestecioglu,
-004_93a60c7b7c4f63bc.txt). Robots have no IDs and no communication; each sees the robots within d_max (sensing.radius)
+"""`method=cezayirli`: non-communicating robots with switchable formations (Cezayirli and Kerestecioglu, "A
+Non-Communicating Multi-Robot System with Switchable Formations"). Robots have no IDs and no communication; each sees
+the robots within d_max (sensing.radius)
 with bounded range and bearing errors (sensing.range_error, sensing.bearing_error_deg) and occlusion (sensing.occlusion).
 
 Local Steering Strategy (Section III, Fig. 2): a follower steps towards the minimiser of its cost J by the gradient step

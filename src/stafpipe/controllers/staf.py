@@ -1,4 +1,4 @@
-"""`method=staf`: the full STAF hierarchy (000_f89c49495043d27c.txt; App. B.2 execution). The plan
+"""`method=staf`: the full STAF hierarchy (STAF, App. B.2 execution). The plan
 (controllers/staf_plan.py: deep graph cut when a passage ahead is too narrow, subteams in the team's formation type
 passing one after another, regroup into the original formation) gives every robot its target; the trained
 intermediate GNN + low-level policy (learning/staf_net.py, `stafpipe train-ppo train_ppo.method=staf`) drives it there,

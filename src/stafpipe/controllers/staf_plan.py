@@ -1,4 +1,4 @@
-"""STAF's execution plan (STAF 000_f89c49495043d27c.txt, Sec. 3 and App. B.2): where every robot should be now.
+"""STAF's execution plan (STAF, Sec. 3 and App. B.2): where every robot should be now.
 
 The team travels as one formation along its planned path (TeamInfo.path). When a passage ahead is too narrow for the
 whole team, the high level (deep graph cut, `highlevel/`) divides it into m subteams (m=auto: the smallest m whose

@@ -1,5 +1,5 @@
-"""`method=zhu`: distributed formation splitting and merging (Zhu, Juhl, Ferranti, Alonso-Mora, ICRA 2019,
-001_9e11512086778daf.txt), in 2D.
+"""`method=zhu`: distributed formation splitting and merging (Zhu, Juhl, Ferranti and Alonso-Mora, ICRA 2019), in
+2D.
 
 Every `control_period` (the 5 Hz of Section V-A) each robot grows its obstacle-free convex region P_i within its
 visibility r_B (`convex_region.grow_region`; moving obstacles swept over the horizon tau, Eq. (1)), and each (sub)team

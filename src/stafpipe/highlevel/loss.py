@@ -1,4 +1,4 @@
-"""STAF's unsupervised subteaming loss, Eq. (1) (000_f89c49495043d27c.txt, Section 3), per team of a batch.
+"""STAF's unsupervised subteaming loss, Eq. (1) (STAF, Section 3), per team of a batch.
 
   L_st = Y(1 - Y)^T E  +  sum_j (sum_i y_ij - n/m)  +  sum_j || sum_i y_ij p_i / sum_i y_ij - sum_i y_ij g_i / sum_i y_ij ||
 

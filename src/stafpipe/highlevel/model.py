@@ -1,4 +1,4 @@
-"""The deep graph cut network of STAF's high level (000_f89c49495043d27c.txt, Section 3 and Appendix C).
+"""The deep graph cut network of STAF's high level (STAF, Section 3 and Appendix C).
 
 Embedding omega (a graph attention network, [54] = GAT):
   m_i = W^v p_i                                          (Section 3; Appendix C: W^v is 2 x 32)
@@ -87,7 +87,7 @@ class DeepGraphCut(nn.Module):
 
 class NumpyGraphCut:
     """The same forward pass in numpy with dense attention, for deciding one small team fast (torch's per-op overhead
-    dominates below ~100 robots: PERFORMANCE-NOTES). A test checks it equals DeepGraphCut's output."""
+    dominates below ~100 robots: measured on the 2-core development machine). A test checks it equals DeepGraphCut's output."""
 
     def __init__(self, model: DeepGraphCut):
         self.cfg = model.cfg

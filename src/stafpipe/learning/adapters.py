@@ -94,7 +94,7 @@ class DGNNAdapter(Adapter):
 
 
 class StafAdapter(Adapter):
-    """STAF (000_f89c49495043d27c.txt, Sec. 3, App. B): the plan (deep graph cut, subteams, regroup;
+    """STAF (Sec. 3, App. B): the plan (deep graph cut, subteams, regroup;
     controllers/staf_plan.py) gives each robot its target; the network sees the robot-frame states of
     `features.staf_features`; the reward adds R^adp and the proximity penalty (`staf_penalties`)."""
 

@@ -1,4 +1,4 @@
-"""STAF's intermediate and low levels (000_f89c49495043d27c.txt, Sec. 3; App. C), one policy shared by all robots.
+"""STAF's intermediate and low levels (STAF, Sec. 3; App. C), one policy shared by all robots.
 
 Intermediate level phi: z_i = W^z s_i, f_i = W^f z_i + sum_{j in N(i)} W^f (z_j - z_i) (Sec. 3), W^z 6 x 64 -> here
 9 x 64 on the robot-frame state of features.staf_features (the own state has 6 entries, as App. C's 6 x 64; the

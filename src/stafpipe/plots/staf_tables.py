@@ -1,4 +1,4 @@
-"""STAF's result tables from eval runs, ours beside the paper's (000_f89c49495043d27c.txt, Table 1; Table 2 is only
+"""STAF's result tables from eval runs, ours beside the paper's (STAF, Table 1; Table 2 is only
 described in the text: "a 100% success rate across all formations" for every subteam).
 
 One row per (run, method, formation, team size, drive, scenario) group of episodes (a run: one eval directory, so
