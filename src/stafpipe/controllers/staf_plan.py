@@ -177,7 +177,10 @@ class StafPlan:
         tight = np.flatnonzero(2 * (self.clear - self.cfg.margin) < smallest)
         if not len(tight):
             return np.zeros(len(self.clear))
-        gap = np.abs(np.arange(len(self.clear))[:, None] - tight[None]).min(axis=1) * self.ds
+        k = np.arange(len(self.clear))
+        after = np.clip(np.searchsorted(tight, k), 0, len(tight) - 1)  # nearest tight sample at or after k
+        before = np.clip(after - 1, 0, len(tight) - 1)
+        gap = np.minimum(np.abs(k - tight[after]), np.abs(k - tight[before])) * self.ds
         return np.clip(1.0 - gap / max(self.cfg.file_ramp, 1e-9), 0.0, 1.0)
 
     def _m_wanted(self, eta: float) -> int:
