@@ -42,13 +42,13 @@ class LearnedController(Controller):
 
     def act(self, obs: Observation) -> np.ndarray:
         dt, self.last_time = float(obs.time) - self.last_time, float(obs.time)
-        f, _, targets = self.adapter.step(Observation(*(np.asarray(x)[None] for x in obs)), dt)
+        batch = Observation(*(np.asarray(x)[None] for x in obs))  # a batch of one world, as the adapter takes
+        f, _, targets = self.adapter.step(batch, dt)
         self._targets = targets[0].copy()
         self._subteams = self.adapter.subteams()[0].copy()
         for kind, robots, detail in self.adapter.drain_events(0):
             self.emit(kind, robots, detail)
         if self.teacher != "learned":
-            batch = Observation(*(np.asarray(x)[None] for x in obs))
             radius = self.adapter.teams[0].scenario.spec.robot.radius
             mean = teacher_actions(self.teacher, targets - batch.position, batch, radius, self.max_speed,
                                    self.cfg.proportional_gain)

@@ -35,9 +35,10 @@ class StafMethodConfig:
 
     def check(self, key: str = "method") -> None:
         from stafpipe.errors import require
+        from stafpipe.learning.teachers import TEACHERS
 
-        require(self.low_level in ("learned", "proportional", "avoiding"), f"{key}.low_level",
-                "must be learned, proportional or avoiding", self.low_level)
+        require(self.low_level in ("learned", *TEACHERS), f"{key}.low_level",
+                f"must be one of {['learned', *TEACHERS]}", self.low_level)
         require(self.proportional_gain > 0, f"{key}.proportional_gain", "must be > 0", self.proportional_gain)
         self.plan.check(f"{key}.plan")
 

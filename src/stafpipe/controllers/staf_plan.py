@@ -255,12 +255,13 @@ class StafPlan:
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
         lateral = np.abs(self.frame.lateral(pos))
         teams.sort(key=lambda idx: -(progress[idx].mean() - lateral[idx].mean()))
-        self.order, self.slots, anchors = [], [], []
+        self.order, self.slots, anchors, self.file_weights = [], [], [], []
         last_depth = 0.0
         for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
             unit = unit_slots(self.kind, len(idx), self.angle)
             depth = _extent(unit * self.spacing, self.radius)[0]
-            if self._file_weights(unit).any():  # room for the column the subteam becomes in single file
+            self.file_weights.append(self._file_weights(unit))
+            if self.file_weights[-1].any():  # room for the column the subteam becomes in single file
                 depth = max(depth, (len(idx) - 1) * self.spacing + 2 * self.radius)
             a = progress.max() + depth / 2 if not anchors else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
             point, heading = self.frame.at(a)
@@ -273,7 +274,6 @@ class StafPlan:
         self.labels = np.zeros(self.n, dtype=int)
         for j, idx in enumerate(self.order):
             self.labels[idx] = j
-        self.file_weights = [self._file_weights(unit) for unit in self.slots]
         self.anchor = np.array(anchors)
         # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
         self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
@@ -423,8 +423,8 @@ class StafPlan:
     @property
     def expected(self) -> np.ndarray:
         """(n, n) d_ij of R^adp (STAF Sec. 3): the distance between two robots' targets, i.e. between their slots in
-        their subteam's (shrunk) formation or, at the regroup, between their targets sliding to the goal slots. Only
-        pairs in the same subteam are used."""
+        their subteam's formation (nominal spacing; shrunk with adapt=geometric; blended into a column in single
+        file) or, at the regroup, between their targets sliding to the goal slots. Only same-subteam pairs are used."""
         return np.linalg.norm(self.targets[:, None] - self.targets[None], axis=-1)
 
     def drain_events(self) -> list[tuple[str, list[int], str]]:

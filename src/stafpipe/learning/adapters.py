@@ -89,7 +89,7 @@ class DGNNAdapter(Adapter):
                                for w, t in enumerate(self.teams)])
         else:
             target = goal
-        self._aim = goal if pc.guide != "path" else target
+        self._aim = target  # a teacher steers where the network is guided
         return Step(features(obs, pc.goal_clip, self.sensing_radius, target), goal, target)
 
 

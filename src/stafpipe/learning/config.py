@@ -63,8 +63,9 @@ class PolicyConfig:
 
 @dataclass
 class ImitationConfig:
-    """Warm start before PPO (`learning/ppo.py:imitate`): the network imitates the proportional step to its target,
-    then PPO trains it alone. A teacher for the first minutes only, never part of the trained policy's action."""
+    """Warm start before PPO (`learning/ppo.py:imitate`): the network imitates a hand-made low level (`teacher`,
+    learning/teachers.py), then PPO trains it alone. A teacher for the first minutes only, never part of the trained
+    policy's action."""
 
     epochs: int = 0
     """Passes of supervised regression over the teacher's samples; 0: no warm start."""
@@ -140,8 +141,9 @@ class TrainPPOConfig:
         im = self.imitation
         require(im.epochs >= 0 and im.rollouts >= 1 and im.batch >= 1 and im.dagger >= 0, f"{key}.imitation",
                 "epochs >= 0, rollouts >= 1, batch >= 1, dagger >= 0", (im.epochs, im.rollouts, im.batch, im.dagger))
-        require(im.teacher in ("proportional", "avoiding"), f"{key}.imitation.teacher", "must be proportional or "
-                "avoiding", im.teacher)
+        from stafpipe.learning.teachers import TEACHERS
+
+        require(im.teacher in TEACHERS, f"{key}.imitation.teacher", f"must be one of {list(TEACHERS)}", im.teacher)
         require(im.gain > 0 and im.noise >= 0 and im.lr > 0, f"{key}.imitation", "gain > 0, noise >= 0, lr > 0",
                 (im.gain, im.noise, im.lr))
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):

@@ -29,7 +29,7 @@ class Features(NamedTuple):
     """(.., n, n) bool: j is i's neighbour."""
 
 
-def _rotate(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+def to_robot_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Express world-frame vectors v (.., 2) in frames of heading (cos c, sin s): R(-heading) v."""
     return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
 
@@ -48,11 +48,11 @@ def features(obs: Observation, goal_clip: float, sensing_radius: float, target: 
     dist = np.linalg.norm(to_goal, axis=-1, keepdims=True)
     to_goal = to_goal * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     near = np.minimum(obs.obstacle_distance, sensing_radius)[..., None]
-    own = np.concatenate([_rotate(to_goal, c, s), _rotate(obs.velocity, c, s),
+    own = np.concatenate([to_robot_frame(to_goal, c, s), to_robot_frame(obs.velocity, c, s),
                           _clip_obstacle(obs, c, s, sensing_radius), near], axis=-1)
     cc, ss = c[..., :, None], s[..., :, None]
-    rel = _rotate(obs.rel_position, cc, ss)
-    rel_v = _rotate(obs.rel_velocity, cc, ss)
+    rel = to_robot_frame(obs.rel_position, cc, ss)
+    rel_v = to_robot_frame(obs.rel_velocity, cc, ss)
     edge = np.concatenate([rel, rel_v, np.linalg.norm(rel, axis=-1, keepdims=True)], axis=-1)
     mask = obs.neighbours
     return Features(own.astype(np.float32), np.where(mask[..., None], edge, 0.0).astype(np.float32), mask)
@@ -62,7 +62,7 @@ def _clip_obstacle(obs: Observation, c: np.ndarray, s: np.ndarray, radius: float
     # Obstacles beyond the sensing radius are seen at the radius, in their direction.
     v = obs.obstacle
     length = np.linalg.norm(v, axis=-1, keepdims=True)
-    return _rotate(v * np.minimum(1.0, radius / np.maximum(length, 1e-9)), c, s)
+    return to_robot_frame(v * np.minimum(1.0, radius / np.maximum(length, 1e-9)), c, s)
 
 
 STAF_OWN, STAF_EDGE = 6, 9
@@ -81,11 +81,11 @@ def staf_features(obs: Observation, target: np.ndarray, same: np.ndarray, goal_c
     clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     length = np.linalg.norm(obs.obstacle, axis=-1, keepdims=True)
     obstacle = obs.obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))  # seen at most at the radius
-    own = np.concatenate([_rotate(clipped, c, s), _rotate(obs.velocity, c, s), _rotate(obstacle, c, s)], axis=-1)
+    own = np.concatenate([to_robot_frame(clipped, c, s), to_robot_frame(obs.velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1)
     cc, ss = c[..., :, None], s[..., :, None]
     pair = lambda v: v[..., None, :, :] - v[..., :, None, :]  # noqa: E731  [i, j] = v_j - v_i
-    diff = np.concatenate([_rotate(obs.rel_position, cc, ss), _rotate(pair(target), cc, ss),
-                           _rotate(obs.rel_velocity, cc, ss), _rotate(pair(obstacle), cc, ss),
+    diff = np.concatenate([to_robot_frame(obs.rel_position, cc, ss), to_robot_frame(pair(target), cc, ss),
+                           to_robot_frame(obs.rel_velocity, cc, ss), to_robot_frame(pair(obstacle), cc, ss),
                            (same.astype(np.float32) - 1.0)[..., None]], axis=-1)
     mask = obs.neighbours
     return Features(own.astype(np.float32), np.where(mask[..., None], diff, 0.0).astype(np.float32), mask)
@@ -107,9 +107,9 @@ def staf_pairs(position: np.ndarray, velocity: np.ndarray, heading: np.ndarray, 
     clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     length = np.linalg.norm(obstacle, axis=-1, keepdims=True)
     obstacle = obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))
-    own = np.concatenate([_rotate(clipped, c, s), _rotate(velocity, c, s), _rotate(obstacle, c, s)], axis=-1)
+    own = np.concatenate([to_robot_frame(clipped, c, s), to_robot_frame(velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1)
     ci, si = c[i], s[i]
-    diff = np.concatenate([_rotate(position[j] - position[i], ci, si), _rotate(target[j] - target[i], ci, si),
-                           _rotate(velocity[j] - velocity[i], ci, si), _rotate(obstacle[j] - obstacle[i], ci, si),
+    diff = np.concatenate([to_robot_frame(position[j] - position[i], ci, si), to_robot_frame(target[j] - target[i], ci, si),
+                           to_robot_frame(velocity[j] - velocity[i], ci, si), to_robot_frame(obstacle[j] - obstacle[i], ci, si),
                            (labels[j] == labels[i]).astype(float)[:, None] - 1.0], axis=-1)
     return own.astype(np.float32), i, diff.astype(np.float32)

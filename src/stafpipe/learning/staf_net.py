@@ -21,8 +21,8 @@ from stafpipe.learning.features import STAF_EDGE
 
 
 def proportional_step(own: torch.Tensor, gain: float) -> torch.Tensor:
-    """(.., 2) a step towards the target at min(1, gain x distance) of top speed; `own[..., :2]` is the robot-frame
-    target vector of both policies' features (the method with no learned low level, and the imitation teacher)."""
+    """(.., 2) the residual prior (`policy.prior_gain` > 0): a step towards the target at min(1, gain x distance) of top
+    speed, `own[..., :2]` being the robot-frame target vector (learning/teachers.py takes the same step in numpy)."""
     step = gain * own[..., :2]
     return step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
 

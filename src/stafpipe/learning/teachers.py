@@ -1,7 +1,8 @@
 """Hand-made low levels: the imitation teachers of the warm start (learning/ppo.py:imitate) and, in `method=staf`
 (`method.low_level`), the method with its learned low level removed, for the ablation of docs/staf.md.
 
-- `proportional`: a step towards the target at min(1, gain x distance) of top speed (staf_net.proportional_step).
+- `proportional`: a step towards the target at min(1, gain x distance) of top speed (the step of the residual prior,
+  staf_net.proportional_step).
 - `avoiding`: the same step, then the classical methods' collision avoidance (controllers/base.py:limit_approach):
   towards a robot or obstacle closer than 0.35 m the approach speed is capped at 2 x (gap - 0.02 m), as in `method=lf`.
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from stafpipe.controllers.base import limit_approach
+from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
 TEACHERS = ("proportional", "avoiding")
@@ -26,6 +28,4 @@ def teacher_actions(kind: str, to_aim: np.ndarray, obs: Observation, radius: flo
     if kind == "avoiding":
         world = np.stack([limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN)
                           for w in range(len(world))])
-    c, s = np.cos(obs.heading), np.sin(obs.heading)
-    robot = np.stack([c * world[..., 0] + s * world[..., 1], -s * world[..., 0] + c * world[..., 1]], axis=-1)
-    return robot / max_speed
+    return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed
