@@ -1,11 +1,13 @@
+import numpy as np
 import pandas as pd
 from typer.testing import CliRunner
 
 from stafpipe.cli import app
 from stafpipe.episode import scenario_from_yaml
-from stafpipe.episode_log import read_episode
+from stafpipe.episode_log import read_episode, recover
 from stafpipe.inspect_log import recompute_metrics
 from stafpipe.launch import launch
+from stafpipe.mcap_check import check, intact_records
 
 FAST = ["scenario.time_limit=12", "eval.episodes=2"]
 
@@ -49,14 +51,60 @@ def test_inspect_and_recover(workdir) -> None:
     cut = workdir / "cut.mcap"
     cut.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
     bad = runner.invoke(app, ["inspect", str(cut)])
-    assert bad.exit_code == 2 and "--recover" in bad.output
+    assert bad.exit_code == 2 and "--recover" in bad.output and "truncated" in bad.output
     rec = runner.invoke(app, ["inspect", "--recover", str(cut)])
     assert rec.exit_code == 0
     recovered = read_episode(workdir / "cut.recovered.mcap")
     full = read_episode(path)
     k = len(recovered.time)
-    assert 0 < k < len(full.time)
+    assert 0 < k < len(full.time) and recovered.recovered is not None
     assert (recovered.positions == full.positions[:k]).all()
+    shown = runner.invoke(app, ["inspect", str(workdir / "cut.recovered.mcap")])
+    assert shown.exit_code == 0 and "PARTIAL" in shown.output
+
+
+def test_a_flipped_byte_anywhere_is_found(workdir) -> None:
+    _eval("eval.episodes=1")
+    [path] = list(workdir.glob("outputs/eval/*/*/episodes/*.mcap"))
+    data = path.read_bytes()
+    assert check(data) == []
+    rng = np.random.default_rng(0)
+    # the head and tail records byte by byte (magic, Header, DataEnd, summary, Footer), the rest sampled
+    spots = [*range(0, 80), *range(len(data) - 700, len(data)), *rng.integers(80, len(data) - 700, 150)]
+    for q in spots:
+        flipped = bytearray(data)
+        flipped[q] ^= 1 << int(rng.integers(8))
+        assert check(bytes(flipped)), q
+
+
+def _chunk_offsets(data: bytes) -> list[int]:
+    pos, out = 8, []
+    while data[pos] != 0x0F:  # DataEnd
+        if data[pos] == 0x06:
+            out.append(pos)
+        pos += 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
+    return out
+
+
+def test_recover_keeps_every_intact_chunk_after_a_damaged_one(workdir) -> None:
+    _eval("eval.episodes=1")
+    [path] = list(workdir.glob("outputs/eval/*/*/episodes/*.mcap"))
+    data = path.read_bytes()
+    whole = intact_records(data)
+    assert whole.chunks >= 3 and not whole.damaged
+    second = _chunk_offsets(data)[1]  # the first chunk holds /episode, without which nothing is an episode
+    damaged = bytearray(data)
+    damaged[second + 100] ^= 0xFF
+    damaged_path = workdir / "flip.mcap"
+    damaged_path.write_bytes(bytes(damaged))
+    bad = CliRunner().invoke(app, ["inspect", str(damaged_path)])
+    assert bad.exit_code == 2 and "chunk fails its CRC" in bad.output
+    kept, _, damage = recover(damaged_path, workdir / "flip.recovered.mcap")
+    scan = intact_records(bytes(damaged))
+    assert scan.chunks == whole.chunks - 1 and kept == len(scan.messages) > 0.5 * len(whole.messages)
+    assert [str(d) for d in damage][0].startswith("byte")
+    full, part = read_episode(path), read_episode(workdir / "flip.recovered.mcap")
+    assert part.time[-1] == full.time[-1] and 0 < len(part.time) < len(full.time)  # the end is kept
 
 
 def test_robot_group_replaces_the_scenario_robot(workdir) -> None:

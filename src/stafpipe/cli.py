@@ -98,7 +98,7 @@ def run(
 @app.command()
 def inspect(
     file: str = typer.Argument(..., help="An episode's MCAP file."),
-    recover: bool = typer.Option(False, "--recover", help="Write FILE.recovered.mcap with every complete record."),
+    recover: bool = typer.Option(False, "--recover", help="Write FILE.recovered.mcap with every intact chunk's records (a partial episode)."),
 ) -> None:
     """Summarise an episode's MCAP log and recompute its metrics from the log alone."""
     from stafpipe.episode_log import recover as recover_log
@@ -107,8 +107,9 @@ def inspect(
     try:
         if recover:
             out = file[: -len(".mcap")] + ".recovered.mcap" if file.endswith(".mcap") else file + ".recovered.mcap"
-            kept, channels = recover_log(file, out)
-            typer.echo(f"recovered {kept} messages on {channels} channels into {out}")
+            kept, channels, damage = recover_log(file, out)
+            found = "; ".join(map(str, damage)) or "no damage found"
+            typer.echo(f"recovered {kept} messages on {channels} channels into {out} ({found})")
             return
         report, equal = describe(file)
     except StafpipeError as exc:

@@ -16,17 +16,18 @@ from typing import Any, BinaryIO
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import Writer as RawWriter
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer
 
 from stafpipe.errors import StafpipeError
+from stafpipe.mcap_check import Damage, check, intact_records, seal_data_crc
 
 _MSG_DIR = Path(__file__).with_name("msg")
 CHUNK_SIZE = 32 * 1024
+RECOVERED = "stafpipe.recovered"
+"""Metadata record of a file written by `recover`: a partial episode."""
 TOPICS = {
     "/episode": "stafpipe_msgs/msg/EpisodeInfo",
     "/robots/poses": "geometry_msgs/msg/PoseArray",
@@ -56,7 +57,7 @@ class EpisodeLogWriter:
         self.path = Path(path)
         self.partial = self.path.with_name(self.path.name + ".part")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file: BinaryIO = open(self.partial, "wb")  # noqa: SIM115 - closed in close()
+        self._file: BinaryIO = open(self.partial, "w+b")  # noqa: SIM115 - closed in close()
         self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, enable_crcs=True)
         self._schemas = {topic: self._writer.register_msgdef(dt, _msgdef(dt)) for topic, dt in TOPICS.items()}
 
@@ -95,6 +96,8 @@ class EpisodeLogWriter:
         """Finish the file (summary, footer) and move it to its final name."""
         self._writer.finish()
         self._file.flush()
+        seal_data_crc(self._file)
+        self._file.flush()
         os.fsync(self._file.fileno())
         self._file.close()
         os.replace(self.partial, self.path)
@@ -120,6 +123,8 @@ class EpisodeRecord:
     events: list[dict[str, Any]] = field(default_factory=list)
     metrics: dict[str, float] | None = None
     topics: dict[str, int] = field(default_factory=dict)
+    recovered: str | None = None
+    """The damage a recovered (partial) log was copied from; None for a log as written."""
 
 
 def read_episode(path: str | Path) -> EpisodeRecord:
@@ -127,10 +132,13 @@ def read_episode(path: str | Path) -> EpisodeRecord:
     path = Path(path)
     if not path.is_file():
         raise LogError(f"{path}: no such file")
-    info, states, events, metrics, topics = None, [], [], None, {}
+    info, states, events, metrics, topics, recovered = None, [], [], None, {}, None
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
+            for meta in reader.iter_metadata():
+                if meta.name == RECOVERED:
+                    recovered = meta.metadata.get("damage", "unknown")
             for _, channel, _, msg in reader.iter_decoded_messages(log_time_order=True):
                 topic = channel.topic
                 topics[topic] = topics.get(topic, 0) + 1
@@ -155,45 +163,40 @@ def read_episode(path: str | Path) -> EpisodeRecord:
         time=np.array([s.time for s in states]), positions=arr("x", "y"), velocities=arr("vx", "vy"),
         headings=np.stack([np.asarray(s.heading, float) for s in states]), targets=arr("target_x", "target_y"),
         subteams=np.stack([np.asarray(s.subteam, int) for s in states]), movers=arr("mover_x", "mover_y"),
-        events=events, metrics=metrics, topics=topics,
+        events=events, metrics=metrics, topics=topics, recovered=recovered,
     )
 
 
-def recover(src: str | Path, dst: str | Path) -> tuple[int, int]:
-    """Copy every complete record of a truncated or damaged MCAP file into a valid one.
-
-    Returns (messages kept, channels). Stops at the first record that cannot be read.
-    """
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    messages: list[Message] = []
-    with open(src, "rb") as f:
-        try:
-            for record in StreamReader(f, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    messages.append(record)
-        except (McapError, ValueError, EOFError, AssertionError, Exception):  # noqa: BLE001 - truncation shows many ways
-            pass
+def recover(src: str | Path, dst: str | Path) -> tuple[int, int, list[Damage]]:
+    """Copy every intact chunk's records of a truncated or damaged MCAP file into a valid one, also those after a
+    damaged chunk (mcap_check.intact_records). The copy carries a `stafpipe.recovered` metadata record naming the
+    damage, so that it reads as a partial episode. Returns (messages kept, channels, the damage found)."""
+    src = Path(src)
+    if not src.is_file():
+        raise LogError(f"{src}: no such file")
+    data = src.read_bytes()
+    scan = intact_records(data)
+    damage = check(data)
+    messages = [m for m in scan.messages if m.channel_id in scan.channels]
     if not messages:
         raise LogError(f"{src}: no complete message could be recovered")
     dst = Path(dst)
     tmp = dst.with_name(dst.name + ".part")
-    with open(tmp, "wb") as out:
-        writer = RawWriter(out, chunk_size=CHUNK_SIZE, enable_crcs=True)
-        writer.start(profile="ros2", library="stafpipe recover")
-        schema_ids = {old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
-                      for old, s in schemas.items()}
-        channel_ids = {old: writer.register_channel(topic=c.topic, message_encoding=c.message_encoding,
-                                                    schema_id=schema_ids.get(c.schema_id, 0), metadata=c.metadata)
-                       for old, c in channels.items()}
-        for m in messages:
-            if m.channel_id in channel_ids:
+    try:
+        with open(tmp, "wb") as out:
+            writer = RawWriter(out, chunk_size=CHUNK_SIZE, enable_crcs=True, enable_data_crcs=True)
+            writer.start(profile="ros2", library="stafpipe recover")
+            schema_ids = {old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
+                          for old, s in scan.schemas.items()}
+            channel_ids = {old: writer.register_channel(topic=c.topic, message_encoding=c.message_encoding,
+                                                        schema_id=schema_ids.get(c.schema_id, 0), metadata=c.metadata)
+                           for old, c in scan.channels.items()}
+            for m in messages:
                 writer.add_message(channel_id=channel_ids[m.channel_id], log_time=m.log_time, data=m.data,
                                    publish_time=m.publish_time, sequence=m.sequence)
-        writer.finish()
-    os.replace(tmp, dst)
-    return len(messages), len(channels)
+            writer.add_metadata(RECOVERED, {"source": src.name, "damage": "; ".join(map(str, damage)) or "none"})
+            writer.finish()
+        os.replace(tmp, dst)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return len(messages), len(scan.channels), damage

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from stafpipe.episode import scenario_from_yaml, trajectory_from_record
-from stafpipe.episode_log import EpisodeRecord, read_episode
+from stafpipe.episode_log import EpisodeRecord, LogError, read_episode
+from stafpipe.mcap_check import check
 from stafpipe.metrics import MetricContext, episode_metrics
 
 
@@ -22,7 +24,15 @@ def _same(a: float, b: float) -> bool:
 
 
 def describe(path: str) -> tuple[str, bool]:
-    """A human-readable report of the log; True when the recomputed metrics equal the logged ones."""
+    """A human-readable report of the log; True when the recomputed metrics equal the logged ones. A damaged file
+    (any CRC, magic or record length that does not hold: mcap_check.check) is an error naming the first damage."""
+    file = Path(path)
+    if not file.is_file():
+        raise LogError(f"{path}: no such file")
+    damage = check(file.read_bytes())
+    if damage:
+        more = f" and {len(damage) - 1} more" if len(damage) > 1 else ""
+        raise LogError(f"{path}: damaged at {damage[0]}{more}; `stafpipe inspect --recover` keeps every intact chunk")
     rec = read_episode(path)
     recomputed = recompute_metrics(rec)
     lines = [f"{path}", f"  method {rec.method}, seed {rec.seed}, {rec.positions.shape[1]} robots, "
@@ -37,11 +47,15 @@ def describe(path: str) -> tuple[str, bool]:
     for e in rec.events:
         kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
     lines.append("  events: " + (", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"))
-    logged = rec.metrics or {}
+    logged = rec.metrics if rec.metrics and rec.recovered is None else {}  # a partial episode has other metrics
     equal = all(_same(recomputed[k], float(logged.get(k, math.nan))) for k in recomputed) if logged else True
-    verdict = ("no logged metrics to compare (a recovered file?)" if not logged
+    if rec.recovered is not None:
+        lines.insert(1, f"  PARTIAL episode, recovered from a damaged log ({rec.recovered})")
+    verdict = ("not compared with the logged ones" if rec.recovered is not None
+               else "no logged metrics to compare" if not logged
                else "equal to the logged ones" if equal else "DIFFERENT from the logged ones")
-    lines.append(f"  metrics (recomputed from the log; {verdict}):")
+    partial = "of the recovered part only, " if rec.recovered is not None else ""
+    lines.append(f"  metrics ({partial}recomputed from the log; {verdict}):")
     for k, v in recomputed.items():
         mark = "" if not logged or _same(v, float(logged.get(k, math.nan))) else f"   (logged {logged.get(k)})"
         lines.append(f"    {k:22s} {v:12.4f}{mark}")

@@ -1,0 +1,190 @@
+"""Integrity of an MCAP file, record by record, and recovery of every intact chunk.
+
+An MCAP file (the MCAP specification, mcap.dev) is: magic, Header, the data section (Schema, Channel, Chunk,
+MessageIndex, ... records), DataEnd (CRC-32 of the data section), the summary section, Footer (CRC-32 of the summary
+section), magic. Every chunk carries the CRC-32 of its records. `check` verifies all four (magic, chunk, data section,
+summary), so a flipped byte anywhere is found; `intact_records` walks the data section chunk by chunk and steps over a
+damaged chunk (or a damaged record length) to the next chunk whose CRC holds, so nothing intact after a damage is lost.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+import zlib
+from dataclasses import dataclass, field
+
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, McapRecord, Message, Schema
+from mcap.stream_reader import breakup_chunk
+
+MAGIC = b"\x89MCAP0\r\n"
+_FOOTER = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
+_OPCODES = {int(o) for o in Opcode}
+
+
+@dataclass
+class Damage:
+    offset: int
+    """Byte offset in the file where the damaged part starts."""
+    what: str
+
+    def __str__(self) -> str:
+        return f"byte {self.offset}: {self.what}"
+
+
+@dataclass
+class Scan:
+    """What `intact_records` found in the data section."""
+
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    messages: list[Message] = field(default_factory=list)
+    chunks: int = 0
+    damaged: list[Damage] = field(default_factory=list)
+    data_end: int | None = None
+    """Offset of the DataEnd record, if one was reached."""
+
+
+def _record_at(data: bytes, pos: int) -> tuple[int, int] | None:
+    """(opcode, end offset) of a record that starts at `pos` and fits the file, or None."""
+    if pos + 9 > len(data):
+        return None
+    op = data[pos]
+    end = pos + 9 + int.from_bytes(data[pos + 1 : pos + 9], "little")
+    return (op, end) if op in _OPCODES and end <= len(data) else None
+
+
+def _unreadable(data: bytes, pos: int) -> str:
+    if pos + 9 > len(data) or (data[pos] in _OPCODES and
+                               pos + 9 + int.from_bytes(data[pos + 1 : pos + 9], "little") > len(data)):
+        return "a record runs past the end of the file (truncated)"
+    return f"unknown record opcode {data[pos]}"
+
+
+def _chunk_records(data: bytes, pos: int, end: int) -> list[McapRecord] | None:
+    """The records of the chunk at `pos`, or None where it does not parse or fails its CRC."""
+    try:
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
+        return breakup_chunk(chunk, validate_crc=True)
+    except Exception:  # noqa: BLE001 - a damaged chunk fails in many ways (CRC, decompression, lengths)
+        return None
+
+
+def _resync(data: bytes, start: int) -> int | None:
+    """The first offset >= start where an intact chunk or a DataEnd record begins (lengths and CRCs must hold)."""
+    candidates = (bytes([Opcode.CHUNK]), bytes([Opcode.DATA_END]))
+    pos = start
+    while True:
+        found = [q for q in (data.find(c, pos) for c in candidates) if q >= 0]
+        if not found:
+            return None
+        q = min(found)
+        rec = _record_at(data, q)
+        if rec is not None:
+            op, end = rec
+            if op == Opcode.DATA_END and end - q == 9 + 4 and data[end : end + 1] in (b"", *[bytes([o]) for o in _OPCODES]):
+                return q
+            if op == Opcode.CHUNK and _chunk_records(data, q, end) is not None:
+                return q
+        pos = q + 1
+
+
+def intact_records(data: bytes) -> Scan:
+    """Every schema, channel and message of the data section that lies in an intact chunk (or outside chunks)."""
+    scan = Scan()
+    if data[:8] != MAGIC:
+        scan.damaged.append(Damage(0, "not the MCAP magic"))
+    pos = 8
+    while pos < len(data):
+        rec = _record_at(data, pos)
+        records: list[McapRecord] | None = None
+        if rec is not None and rec[0] == Opcode.CHUNK:
+            records = _chunk_records(data, pos, rec[1])
+        if rec is None or (rec[0] == Opcode.CHUNK and records is None):
+            scan.damaged.append(Damage(pos, "chunk fails its CRC or does not parse" if rec else _unreadable(data, pos)))
+            nxt = _resync(data, pos + 1)
+            if nxt is None:
+                break
+            pos = nxt
+            continue
+        op, end = rec
+        if op == Opcode.DATA_END:
+            scan.data_end = pos
+            _summary_definitions(data, end, scan)
+            break
+        if op == Opcode.CHUNK:
+            scan.chunks += 1
+        elif op in (Opcode.SCHEMA, Opcode.CHANNEL):  # outside chunks: no CRC of their own (the data section's)
+            try:
+                records = [(Schema if op == Opcode.SCHEMA else Channel).read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))]
+            except Exception:  # noqa: BLE001 - a damaged record fails in many ways
+                scan.damaged.append(Damage(pos, "a schema or channel record does not parse"))
+        for r in records or []:
+            if isinstance(r, Schema):
+                scan.schemas[r.id] = r
+            elif isinstance(r, Channel):
+                scan.channels[r.id] = r
+            elif isinstance(r, Message):
+                scan.messages.append(r)
+        pos = end
+    return scan
+
+
+def seal_data_crc(f: "io.BufferedRandom") -> None:
+    """Write the data section's CRC into the DataEnd record of a finished MCAP file open for update (the ROS 2
+    writer leaves it 0, "not computed", so a flipped byte between chunks would go unseen)."""
+    f.seek(0)
+    data = f.read()
+    footer = len(data) - 8 - _FOOTER
+    summary_start = struct.unpack_from("<Q", data, footer + 9)[0] if data[footer] == Opcode.FOOTER else 0
+    data_end = (summary_start or footer) - 13
+    if data_end < 8 or data[data_end] != Opcode.DATA_END:
+        raise ValueError("no DataEnd record before the summary")
+    f.seek(data_end + 9)
+    f.write(struct.pack("<I", zlib.crc32(data[:data_end])))
+
+
+def _summary_definitions(data: bytes, pos: int, scan: Scan) -> None:
+    """Schemas and channels repeated in the summary section (the writer repeats them), for those whose chunk is
+    damaged; a damaged summary is reported by `check`, not here."""
+    while (rec := _record_at(data, pos)) is not None and rec[0] != Opcode.FOOTER:
+        op, end = rec
+        try:
+            if op == Opcode.SCHEMA:
+                schema = Schema.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
+                scan.schemas.setdefault(schema.id, schema)
+            elif op == Opcode.CHANNEL:
+                channel = Channel.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
+                scan.channels.setdefault(channel.id, channel)
+        except Exception:  # noqa: BLE001
+            return
+        pos = end
+
+
+def check(data: bytes) -> list[Damage]:
+    """Every damage in an MCAP file's bytes: magic, chunk CRCs, the data section's and the summary's CRC."""
+    scan = intact_records(data)
+    damage = list(scan.damaged)
+    if scan.data_end is None:
+        damage.append(Damage(len(data), "no DataEnd record: the file is truncated"))
+    else:
+        (length, crc) = struct.unpack_from("<QI", data, scan.data_end + 1)
+        if length != 4:
+            damage.append(Damage(scan.data_end, "the DataEnd record's length is wrong"))
+        elif crc != 0 and crc != zlib.crc32(data[: scan.data_end]):
+            damage.append(Damage(scan.data_end, "the data section's CRC does not match"))
+    if len(data) < 8 + _FOOTER or data[-8:] != MAGIC:
+        damage.append(Damage(max(0, len(data) - 8), "no closing MCAP magic: the file is truncated or damaged"))
+        return damage
+    footer = len(data) - 8 - _FOOTER
+    if data[footer] != Opcode.FOOTER:
+        damage.append(Damage(footer, "no Footer record"))
+        return damage
+    summary_start, _, summary_crc = struct.unpack_from("<QQI", data, footer + 9)
+    if summary_start > footer or (summary_start and summary_start < (scan.data_end or 0)):
+        damage.append(Damage(footer, "the Footer's summary offset is out of range"))
+    elif summary_crc != 0 and summary_crc != zlib.crc32(data[summary_start or footer : len(data) - 8 - 4]):
+        damage.append(Damage(summary_start or footer, "the summary section's CRC does not match"))
+    return damage
