@@ -48,3 +48,19 @@ def test_step_reference_and_bad_files(workdir) -> None:
         run_pipeline(_write(workdir, "steps:\n  - {stage: generate, overrides: [wrong=1]}\n"))
     with pytest.raises(StafpipeError, match="no pipeline"):
         run_pipeline("does-not-exist")
+
+
+def test_step_reruns_when_a_file_it_reads_changes(workdir, capsys) -> None:
+    # The config hash is the same, but the map the step reads was edited: the old result must not be reused.
+    from pathlib import Path
+
+    scenario = workdir / "map.yaml"
+    scenario.write_text((Path(__file__).parent / "data" / "s_example.yaml").read_text())
+    path = _write(workdir, "steps:\n  - {name: e, stage: eval, overrides: [experiment=smoke, method=straight, "
+                           f"'scenario.path={scenario}', scenario.time_limit=3, eval.episodes=1]}}\n")
+    assert run_pipeline(path) == 0
+    assert run_pipeline(path) == 0
+    assert capsys.readouterr().out.count("skipped") == 1
+    scenario.write_text(scenario.read_text() + "\n# edited\n")
+    assert run_pipeline(path) == 0
+    assert capsys.readouterr().out.count("skipped") == 0

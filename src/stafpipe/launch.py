@@ -54,6 +54,51 @@ def config_hash(cfg: DictConfig) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+# The config sections whose empty `*checkpoint` keys a stage loads a shipped checkpoint for (inputs_hash).
+SHIPPED_READERS: dict[str, tuple[str, ...]] = {"eval": ("method",), "train-ppo": ("train_ppo",), "ablate": ("high",)}
+
+
+def inputs_hash(cfg: DictConfig) -> str:
+    """SHA-256 of what a run reads besides its config: every file or directory a config string names (a file's
+    content; a directory's file names, sizes and modification times) and, where a `*checkpoint` key the stage reads
+    is empty, the shipped checkpoints it falls back to. A pipeline reruns a step whose inputs changed under the same
+    config (a retrained shipped policy, an edited map), which the config hash alone cannot see."""
+    from stafpipe.paths import package_dir
+
+    digest = hashlib.sha256()
+    readers = SHIPPED_READERS.get(str(cfg.get("stage", "")), ())
+    shipped = False
+
+    def visit(node: object, key: str) -> None:
+        nonlocal shipped
+        if isinstance(node, dict):
+            for k, v in sorted(node.items()):
+                visit(v, f"{key}.{k}" if key else str(k))
+        elif isinstance(node, list):
+            for v in node:
+                visit(v, key)
+        elif key.endswith("checkpoint") and node in ("", None):
+            shipped = shipped or key.split(".")[0] in readers
+        elif isinstance(node, str) and node and len(node) < 4096 and Path(node).exists():
+            digest.update(f"{key}={node}".encode())
+            _digest_path(Path(node), digest)
+
+    visit(OmegaConf.to_container(cfg, resolve=True), "")
+    if shipped:
+        _digest_path(package_dir() / "checkpoints", digest)
+    return digest.hexdigest()
+
+
+def _digest_path(path: Path, digest: "hashlib._Hash") -> None:
+    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    for f in files:
+        stat = f.stat()
+        if path.is_dir():
+            digest.update(f"{f.relative_to(path)}:{stat.st_size}:{stat.st_mtime_ns}".encode())
+        else:
+            digest.update(f.read_bytes())
+
+
 def stage_function(stage: str) -> Callable[[DictConfig, Path], list[Path]]:
     """Import the plain function behind `stage`."""
     module, _, name = STAGE_FUNCTIONS[stage].partition(":")
@@ -85,6 +130,7 @@ def stage_task(cfg: DictConfig) -> None:
     """Hydra's task function for every stage."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     started = time.perf_counter()
+    inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote
     try:
         outputs = stage_function(cfg.stage)(cfg, out_dir)
     except StafpipeError as exc:
@@ -103,6 +149,7 @@ def stage_task(cfg: DictConfig) -> None:
         {
             "stage": cfg.stage,
             "config_hash": config_hash(cfg),
+            "inputs_hash": inputs,
             "outputs": sorted(str(Path(p).relative_to(out_dir)) for p in outputs),
             "seconds": round(time.perf_counter() - started, 3),
             "stafpipe_version": __version__,

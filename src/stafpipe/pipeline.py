@@ -19,7 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config import register_configs
 from stafpipe.errors import StafpipeError
-from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, launch
+from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, inputs_hash, launch
 from stafpipe.paths import conf_dir, pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
@@ -90,19 +90,21 @@ def compose_config(stage: str, overrides: list[str]) -> DictConfig:
         return compose(config_name=config_name(stage), overrides=overrides)
 
 
-def _is_done(run_dir: Path, digest: str) -> bool:
+def _is_done(run_dir: Path, digest: str, inputs: str | None = None) -> bool:
+    """Whether `run_dir` finished with config hash `digest` (and, if given, the same `launch.inputs_hash`)."""
     marker = run_dir / MARKER
     try:
-        return json.loads(marker.read_text()).get("config_hash") == digest
+        done = json.loads(marker.read_text())
     except (OSError, ValueError):
         return False
+    return done.get("config_hash") == digest and (inputs is None or done.get("inputs_hash") == inputs)
 
 
 def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("outputs")) -> int:
     """Run every step in order; stop at the first failure. Returns the exit code."""
     pipe = load_pipeline(find_pipeline(name_or_path))
     dirs: dict[str, Path] = {}
-    plan: list[tuple[PipelineStep, list[str], Path, str]] = []
+    plan: list[tuple[PipelineStep, list[str], Path, str, DictConfig]] = []
     for i, step in enumerate(pipe.steps):  # compose every step first: a bad config stops the pipeline before any work
         if step.stage not in STAGE_FUNCTIONS:
             raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}': unknown stage {step.stage!r}; stages: "
@@ -121,11 +123,11 @@ def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("
         digest = config_hash(cfg)
         run_dir = (out_root / "pipelines" / pipe.name / f"{i:02d}-{step.name}-{digest[:10]}").resolve()
         dirs[step.name] = run_dir
-        plan.append((step, overrides, run_dir, digest))
+        plan.append((step, overrides, run_dir, digest, cfg))
 
-    for i, (step, overrides, run_dir, digest) in enumerate(plan, start=1):
+    for i, (step, overrides, run_dir, digest, cfg) in enumerate(plan, start=1):
         head = f"[{i}/{len(plan)}] {step.name} ({step.stage})"
-        if not force and _is_done(run_dir, digest):
+        if not force and _is_done(run_dir, digest, inputs_hash(cfg)):  # inputs: once the steps before are done
             print(f"{head}: skipped, already done for this config in {run_dir}")
             continue
         started = time.perf_counter()
