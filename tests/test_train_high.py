@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import stafpipe.highlevel.training as training
-from conftest import job_dirs
+from conftest import job_dirs, tensorboard_scalars
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.highlevel.checkpoint import load_checkpoint
 from stafpipe.highlevel.config import HighLevelConfig, TrainHighConfig
@@ -58,6 +58,9 @@ def test_train_high_stage_writes_checkpoint_losses_and_curves(workdir) -> None:
     model, made_by = load_checkpoint(run / "high_level.pt")
     assert made_by["seed"] == 2 and made_by["train_high"]["epochs"] == 2 and made_by["teams"] == 48
     assert (run / "loss_curves.png").stat().st_size > 0
+    board = tensorboard_scalars(run)
+    assert {"train/total", "train/adjacency", "val/balance", "val/goal"} <= set(board)
+    assert board["train/total"] == [(1, pytest.approx(losses.train_total[0])), (2, pytest.approx(losses.train_total[1]))]
 
 
 def test_train_high_on_a_generated_file_and_bad_inputs(workdir) -> None:

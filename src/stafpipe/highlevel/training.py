@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -50,7 +51,8 @@ def evaluate(model: DeepGraphCut, graphs: list[TeamGraph], ms: list[int], w: Los
 
 
 def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, seed: int, out_dir: Path,
-          config_hash: str, made_by: dict[str, Any]) -> tuple[DeepGraphCut, list[dict[str, float]]]:
+          config_hash: str, made_by: dict[str, Any], on_epoch: Callable[[dict[str, float]], None] | None = None
+          ) -> tuple[DeepGraphCut, list[dict[str, float]]]:
     """Train on `graphs`; after every epoch the whole state goes to `out_dir/last.pt`, so a rerun of the same config in
     the same directory continues where a killed one stopped and ends with the same weights as an uninterrupted run."""
     torch.set_num_threads(tc.threads)
@@ -101,6 +103,8 @@ def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, s
         state = {"config_hash": config_hash, "epoch": epoch + 1, "model": model.state_dict(),
                  "optimizer": opt.state_dict(), "history": history}
         save_payload(state_path, state)
+        if on_epoch is not None:
+            on_epoch(row)
         after_epoch(epoch + 1)
     made_by = {**made_by, "train_high": asdict(tc), "seed": seed, "stafpipe_version": __version__, "commit": commit(),
                "final": history[-1] if history else {}}

@@ -47,6 +47,7 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.launch import config_hash
     from stafpipe.plots.training import loss_curve_figure
     from stafpipe.stages.generate import generate_instances
+    from stafpipe.tensorboard_log import TB_DIR, ScalarLog
 
     high: HighLevelConfig = OmegaConf.to_object(cfg.high)  # type: ignore[assignment]
     tc: TrainHighConfig = OmegaConf.to_object(cfg.train_high)  # type: ignore[assignment]
@@ -64,8 +65,13 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     graphs = [team_graph(t, high.features, high.radius) for t in teams]
     log.info("training the deep graph cut on %d teams (%d robots)", len(graphs), len(df))
     made_by = {"data": tc.data or "generated in memory from `data`", "teams": len(graphs)}
-    _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by)
+    board = ScalarLog(out_dir, "epoch")
+    try:
+        _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by, board.write)
+    finally:
+        board.close()
     outputs = [out_dir / "high_level.pt", out_dir / "last.pt"]
+    outputs += sorted((out_dir / TB_DIR).iterdir())
     outputs += write_table(pd.DataFrame(history), out_dir / "losses")
     outputs += save_figure(loss_curve_figure(history), out_dir / "loss_curves", dpi=120)
     final = history[-1]

@@ -79,6 +79,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.plots.training import ppo_figure
     from stafpipe.sensing import SensingConfig
     from stafpipe.stages.eval import with_overrides
+    from stafpipe.tensorboard_log import TB_DIR, ScalarLog
     from stafpipe.training_record import commit
     from stafpipe.world import WorldConfig
 
@@ -117,15 +118,22 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         log.warning("train_ppo.resume: no saved state of this config; starting afresh")
     curves = out_dir / "learning_curves"
 
+    board = ScalarLog(out_dir, "iteration")
+
     def on_iteration(history: list[dict[str, float]]) -> None:
         write_table(pd.DataFrame(history), curves)
+        board.write(history[-1])
 
-    policy, history = train_ppo(tc, draw, world_cfg, sensing, float(cfg.eval.goal_tolerance), int(cfg.seed), out_dir,
-                                digest, resume_from, on_iteration)
+    try:
+        policy, history = train_ppo(tc, draw, world_cfg, sensing, float(cfg.eval.goal_tolerance), int(cfg.seed),
+                                    out_dir, digest, resume_from, on_iteration)
+    finally:
+        board.close()
     made_by = {"train_ppo": OmegaConf.to_container(cfg.train_ppo, resolve=True), "seed": int(cfg.seed),
                "training_maps": sorted({s.name for s in pool}),
                "commit": commit(), "iterations": len(history), "final": history[-1] if history else {}}
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
+    outputs += sorted((out_dir / TB_DIR).iterdir())
     outputs += write_table(pd.DataFrame(history), curves)
     outputs += save_figure(ppo_figure(history), curves, dpi=120)
     last = history[-1]
