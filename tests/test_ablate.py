@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from conftest import job_dirs
@@ -45,6 +46,7 @@ def test_subteam_count_and_classical_studies_give_m_nonempty_subteams(workdir) -
     assert (classical[classical.method == "balanced_kmeans"].imbalance <= 1).all()
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_loss_terms_study_trains_each_variant_and_checks_findings(workdir) -> None:
     df = _run(workdir, "ablate.variants=[a_balance_only,full]", "ablate.train_instances=32", "ablate.epochs=2",
               "ablate.teams=8", "train_high.batch_size=16")

@@ -89,6 +89,7 @@ def test_v_lines_up_only_behind_robots_ahead_along_its_course() -> None:
                        + cfg.beta * 2 * (3.0 - 4.0) * (-level[0]) / 3.0)
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_simulation_2_forms_a_v_behind_the_leader(workdir) -> None:
     """Simulation 2 (Fig. 5): 100 s in, five robots on each side of the leader's course, each arm a chain of about
     d_1 spacing slanting back from the leader (the leader is robot 0, the front of the start circle)."""

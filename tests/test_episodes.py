@@ -1,5 +1,6 @@
 import numpy as np
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from stafpipe.cli import app
@@ -32,6 +33,7 @@ def test_eval_writes_results_summary_and_episodes(workdir) -> None:
             assert value == row[key] or (pd.isna(value) and pd.isna(row[key])), key
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_same_seed_gives_identical_mcap_messages_and_metrics(workdir) -> None:
     _eval("seed=3")
     _eval("seed=3")

@@ -126,6 +126,27 @@ def test_staf_ablation_low_levels_run_and_are_refused_when_unknown(workdir) -> N
     assert labels == ["avoiding", "proportional"]
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
+def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(workdir) -> None:
+    from stafpipe.controllers.learned import checkpoint_mismatch
+
+    # the shipped STAF policy was trained with two subteams: m=auto is another plan than the one it learned on
+    assert launch("eval", ["method=staf", "method.plan.m=auto", "eval.episodes=1", "scenario.time_limit=2"]) == 2
+    assert not job_dirs(workdir)
+    assert launch("eval", ["method=staf", "method.plan.m=auto", "method.allow_mismatch=true", "eval.episodes=1",
+                           "scenario.time_limit=2"]) == 0
+    # the hand-made low levels use no checkpoint: nothing to compare
+    assert launch("eval", ["method=staf", "method.low_level=proportional", "method.plan.adapt=nominal",
+                           "eval.episodes=1", "scenario.time_limit=2"]) == 0
+    made_by = {"train_ppo": {"plan": {"m": "2", "adapt": "geometric"}}, "sensing": {"radius": 3.0}}
+    differ = checkpoint_mismatch(StafMethodConfig(), made_by)
+    assert differ == {"method.sensing_radius": (2.0, 3.0)}
+    run = StafMethodConfig()
+    run.plan.adapt = "nominal"
+    assert set(checkpoint_mismatch(run, made_by)) == {"method.plan.adapt", "method.sensing_radius"}
+    assert checkpoint_mismatch(run, {}) == {}  # an old checkpoint that recorded nothing is not refused
+
+
 @pytest.mark.slow
 def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> None:
     assert launch("generate-maps", ["seed=5", "maps.count=2", "maps.team_sizes=[4,4]", "maps.drives=[holonomic]",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 
 from conftest import job_dirs
 from stafpipe.launch import launch
@@ -22,6 +23,7 @@ def test_lf_in_the_open_reaches_the_goal_in_formation_near_the_time_bound(workdi
     assert r["cfi_0.5"] > 0.85  # formation integrity kept (the corridor-width part of CFI does not apply here)
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_lf_gets_stuck_in_the_corridor_without_collisions(workdir) -> None:
     r = _results(workdir, "scenario.time_limit=60").iloc[0]
     assert r.collisions == 0  # the avoidance caps approach speeds: robots stop short of walls and of each other

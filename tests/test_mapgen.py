@@ -27,6 +27,7 @@ def test_every_family_gives_a_passable_map_with_free_start_and_goal(family) -> N
     assert len(path) >= 2 and 4 <= t.n <= 12
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_widths_team_sizes_formations_and_drives_follow_the_config() -> None:
     cfg = MapsConfig(count=4, families=["corridor", "doorway"], width=[1.0, 1.2], team_sizes=[5, 6],
                      formations=["wedge"], drives=["diff_drive"])
@@ -38,6 +39,7 @@ def test_widths_team_sizes_formations_and_drives_follow_the_config() -> None:
         assert 1.0 - 1e-3 <= lanes[0] - below[-1] <= 1.2 + 1e-3  # the passage's width
 
 
+@pytest.mark.slow  # over 5 s on 2 cores
 def test_maps_depend_only_on_seed_and_index() -> None:
     a = generate_maps(MapsConfig(count=2), seed=7)
     b = generate_maps(MapsConfig(count=1), seed=7)
@@ -45,6 +47,7 @@ def test_maps_depend_only_on_seed_and_index() -> None:
     assert a[:1] == b and a[:1] != c
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_generate_maps_stage_writes_loadable_scenarios_and_refuses_bad_config(workdir) -> None:
     assert launch("generate-maps", ["seed=3", "maps.count=2", "maps.families=[gaps,bollards]"]) == 0
     [run] = job_dirs(workdir)

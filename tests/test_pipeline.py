@@ -50,6 +50,7 @@ def test_step_reference_and_bad_files(workdir) -> None:
         run_pipeline("does-not-exist")
 
 
+@pytest.mark.slow  # over 5 s on 2 cores
 def test_step_reruns_when_a_file_it_reads_changes(workdir, capsys) -> None:
     # The config hash is the same, but the map the step reads was edited: the old result must not be reused.
     from pathlib import Path

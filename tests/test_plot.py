@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from matplotlib.collections import LineCollection
 from matplotlib.colors import to_rgba
 from matplotlib.patches import Polygon
@@ -25,6 +26,7 @@ def _eval_run(workdir):
     return run
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_plot_trajectories_writes_png_and_pdf_per_episode(workdir) -> None:
     run = _eval_run(workdir)
     result = CliRunner().invoke(app, ["plot", "trajectories", str(run), "plot.max_episodes=1"])

@@ -11,11 +11,11 @@ import torch
 from typer.testing import CliRunner
 
 import stafpipe.learning.ppo as ppo
-from conftest import job_dirs
+from conftest import job_dirs, tensorboard_scalars
 from stafpipe.cli import app
 from stafpipe.launch import launch
 from stafpipe.learning.checkpoint import load_policy
-from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
+from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
 from stafpipe.learning.rollout import gae
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
@@ -49,9 +49,9 @@ def test_guide_targets_follow_the_path_then_release_to_the_goal() -> None:
     assert np.allclose(got, [[4.0, 0.0], [10.0, 1.0], [11.0, 10.0]])
 
 
-def _train(out_dir, iterations=3, resume_from=None, on_iteration=lambda h: None):
+def _train(out_dir, iterations=3, resume_from=None, on_iteration=lambda h: None, **extra):
     tc = TrainPPOConfig(iterations=iterations, worlds=2, episode_steps=6, policy=PolicyConfig(hidden=16),
-                        checkpoint_every=1, minibatches=2, epochs=2)
+                        **{"checkpoint_every": 1, "minibatches": 2, "epochs": 2, **extra})
     corridor = load_named_scenario("corridor")
     path = np.array([[4.0, 6.0], [26.0, 6.0]])
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -81,6 +81,21 @@ def test_training_is_deterministic_and_resumes_exactly(tmp_path) -> None:
     assert [r["charts/episode_return"] for r in rhist] == [r["charts/episode_return"] for r in hist]
 
 
+def test_a_kill_after_the_warm_start_resumes_without_redoing_it(tmp_path) -> None:
+    warm = {"imitation": ImitationConfig(epochs=1, rollouts=1, dagger=1, teacher="avoiding"), "checkpoint_every": 5}
+    full, hist = _train(tmp_path / "a", iterations=2, **warm)
+
+    def killed(history) -> None:
+        raise KeyboardInterrupt  # in iteration 1, before its state is saved: only the warm start's is on disk
+
+    with pytest.raises(KeyboardInterrupt):
+        _train(tmp_path / "b", iterations=2, on_iteration=killed, **warm)
+    assert torch.load(tmp_path / "b" / ppo.STATE_FILE, weights_only=True)["iteration"] == 0
+    resumed, rhist = _train(tmp_path / "b", iterations=2, resume_from=tmp_path / "b" / ppo.STATE_FILE, **warm)
+    assert _same(full, resumed)
+    assert rhist[0]["imitation/loss"] == hist[0]["imitation/loss"] > 0
+
+
 @pytest.mark.slow  # over 10 s on 2 cores
 def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
     assert launch("train-ppo", TINY) == 0
@@ -89,6 +104,11 @@ def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
     assert list(curves.iteration) == [1, 2] and curves["losses/value"].notna().all()
     policy, made_by = load_policy(run / "policy.pt", "dgnn")
     assert made_by["iterations"] == 2 and policy.cfg.hidden == 16
+    board = tensorboard_scalars(run)
+    wanted = {"charts/success_rate", "charts/episode_return", "charts/collisions_per_episode", "losses/policy", "losses/value",
+              "losses/approx_kl", "losses/clipfrac", "charts/fps"}
+    assert wanted <= set(board), wanted - set(board)
+    assert [step for step, _ in board["charts/success_rate"]] == [1, 2]
     # resume=true finds the finished state of the same config and has nothing left to do
     assert launch("train-ppo", [*TINY, "train_ppo.resume=true"]) == 0
     second = [d for d in job_dirs(workdir) if d != run][0]

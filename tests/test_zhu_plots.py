@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from stafpipe.cli import app
@@ -19,6 +20,7 @@ def _zhu_run(workdir):  # noqa: ANN001, ANN202
     return run
 
 
+@pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_regions_snapshots_and_timing_table_from_a_zhu_run(workdir) -> None:
     run = _zhu_run(workdir)
     results = pd.read_parquet(run / "results.parquet")

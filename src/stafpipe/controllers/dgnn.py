@@ -20,6 +20,9 @@ class DGNNConfig:
     """Act with the policy's mean (as evaluated); false samples from it."""
     sensing_radius: float = 2.0
     """Must equal the `sensing.radius` the policy was trained with (features clip the obstacle vector to it)."""
+    allow_mismatch: bool = False
+    """Run a checkpoint whose recorded training settings (plan, sensing radius) differ from this run's, with a
+    warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
 
 
 class DGNNController(LearnedController):

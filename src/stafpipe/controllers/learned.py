@@ -3,16 +3,40 @@
 
 from __future__ import annotations
 
+import dataclasses
+import logging
+from typing import Any
+
 import numpy as np
 import torch
 
 from stafpipe.controllers.base import Controller, TeamInfo
+from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import RewardConfig
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import teacher_actions
 from stafpipe.sensing import Observation
+
+log = logging.getLogger(__name__)
+
+
+def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:  # noqa: ANN401
+    """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the plan
+    (`method.plan.*` against `train_ppo.plan.*`) and the sensing radius (against `sensing.radius`), as far as the
+    checkpoint recorded them. Key -> (this run's value, the training value)."""
+    trained = made_by.get("train_ppo", {})
+    differ: dict[str, tuple[Any, Any]] = {}
+    plan, recorded = getattr(cfg, "plan", None), trained.get("plan")
+    if plan is not None and isinstance(recorded, dict):
+        for key, value in dataclasses.asdict(plan).items():
+            if key in recorded and recorded[key] != value:
+                differ[f"method.plan.{key}"] = (value, recorded[key])
+    radius = made_by.get("sensing", {}).get("radius")
+    if radius is not None and float(radius) != float(cfg.sensing_radius):
+        differ["method.sensing_radius"] = (cfg.sensing_radius, radius)
+    return differ
 
 
 class LearnedController(Controller):
@@ -27,9 +51,17 @@ class LearnedController(Controller):
             check()
         self.cfg = cfg
         self.policy, self.made_by = load_policy(cfg.checkpoint, cfg.name)
+        self.teacher = getattr(cfg, "low_level", "learned")  # `learned`, or a hand-made low level (teachers.py)
+        differ = checkpoint_mismatch(cfg, self.made_by) if self.teacher == "learned" else {}
+        if differ:
+            text = "; ".join(f"{k}: this run {a!r}, trained with {b!r}" for k, (a, b) in differ.items())
+            where = cfg.checkpoint or f"the shipped {cfg.name} policy"
+            if not getattr(cfg, "allow_mismatch", False):
+                raise StafpipeError(f"{where} was trained with other settings than this run ({text}); retrain it, "
+                                    "or set method.allow_mismatch=true to run it anyway")
+            log.warning("%s was trained with other settings than this run: %s", where, text)
         self.adapter = ADAPTERS[cfg.name](self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None),
                                           cfg.sensing_radius)
-        self.teacher = getattr(cfg, "low_level", "learned")  # `learned`, or a hand-made low level (teachers.py)
         self.generator = torch.Generator().manual_seed(0)
         self.max_speed = 1.0
         self.last_time = 0.0

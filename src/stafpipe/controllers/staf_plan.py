@@ -31,10 +31,11 @@ class PlanConfig:
     m: str = "2"
     """Subteams: a fixed number (2: STAF Table 1, Table 2 and Fig. 4 divide every team into two) or `auto` (our
     extension: the smallest m whose subteams fit the narrowest passage at the smallest spacing, STAF Sec. 7)."""
-    adapt: str = "learned"
-    """Formation adaptation in a narrow passage: `learned` (the plan keeps each subteam's formation at the team's
-    nominal spacing and the policy deforms it, trained under R^adp: STAF Sec. 3) or `geometric` (the plan shrinks the
-    subteam's spacing to the free width; a comparison without learned adaptation, docs/staf.md)."""
+    adapt: str = "geometric"
+    """Formation adaptation in a narrow passage: `geometric` (the plan shrinks the subteam's spacing to the free width
+    ahead; what the shipped policy was trained on) or `nominal` (the plan keeps each subteam's formation at the
+    team's nominal spacing and the policy must deform it itself, as STAF Sec. 3 attributes to the intermediate GNN
+    under R^adp; measured worse, docs/staf.md "Learned adaptation")."""
     single_file: bool = True
     """Where a subteam's formation does not fit even at the smallest spacing (2r + min_gap; e.g. bollards 1.1 m
     apart, or five robots abreast in 2.4 m), the plan turns its slots into a column along the path (blended in over
@@ -67,7 +68,7 @@ class PlanConfig:
 
         require(self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4",
                 self.m)
-        require(self.adapt in ("learned", "geometric"), f"{key}.adapt", "must be learned or geometric", self.adapt)
+        require(self.adapt in ("geometric", "nominal"), f"{key}.adapt", "must be geometric or nominal", self.adapt)
         for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
@@ -341,9 +342,9 @@ class StafPlan:
         return self.targets
 
     def _spacing(self, j: int, s: float) -> float:
-        """Spacing of subteam j around arc length s: the team's (adapt=learned), or (adapt=geometric) the team's shrunk
+        """Spacing of subteam j around arc length s: the team's (adapt=nominal), or (adapt=geometric) the team's shrunk
         to fit the clearance ahead and behind."""
-        if self.cfg.adapt == "learned":
+        if self.cfg.adapt == "nominal":
             return self.spacing
         depth, width = _extent(self.slots[j] * self.spacing, self.radius)
         lo, hi = int(max(0.0, s - depth) / self.ds), int((s + depth + 1.0) / self.ds) + 1
@@ -423,8 +424,8 @@ class StafPlan:
     @property
     def expected(self) -> np.ndarray:
         """(n, n) d_ij of R^adp (STAF Sec. 3): the distance between two robots' targets, i.e. between their slots in
-        their subteam's formation (nominal spacing; shrunk with adapt=geometric; blended into a column in single
-        file) or, at the regroup, between their targets sliding to the goal slots. Only same-subteam pairs are used."""
+        their subteam's formation (shrunk with adapt=geometric, nominal with adapt=nominal; blended into a column in
+        single file) or, at the regroup, between their targets sliding to the goal slots. Only same-subteam pairs are used."""
         return np.linalg.norm(self.targets[:, None] - self.targets[None], axis=-1)
 
     def drain_events(self) -> list[tuple[str, list[int], str]]:

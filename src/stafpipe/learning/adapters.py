@@ -121,14 +121,14 @@ class StafAdapter(Adapter):
         return self._paths[-1][1]
 
     def begin(self, teams: list[TeamInfo], teacher: bool = False) -> None:
-        """`teacher`: shadow plans with the geometric adaptation run beside the method's own: their targets are
-        the imitation teacher's aim (privileged: the network never sees them)."""
+        """`teacher` with `plan.adapt=nominal`: shadow plans with the geometric adaptation run beside the method's
+        own: their targets are the imitation teacher's aim (privileged: the network never sees them)."""
         super().begin(teams)
         self.plans = [StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width,
                                self.divide) for t in teams]
         shadow = dataclasses.replace(self.plan_cfg, adapt="geometric")
         self.shadows = [StafPlan(shadow, t.scenario, t.template, t.goal, self._centred(t), t.passage_width,
-                                 self.divide) for t in teams] if teacher else []
+                                 self.divide) for t in teams] if teacher and self.plan_cfg.adapt != "geometric" else []
 
     def step(self, obs: Observation, dt: float) -> Step:
         if self.shadows:

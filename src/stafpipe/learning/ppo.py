@@ -113,8 +113,8 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
     teacher, learning/teachers.py) by supervised regression of the action mean, first on states the teacher visits,
     then (`imitation.dagger` rounds, DAgger: Ross, Gordon and Bagnell, AISTATS 2011) on states the network itself
     visits, labelled by the teacher, all samples kept. The teacher may see more than the network
-    (`Adapter.teacher_aim`: for STAF, the targets of the geometrically adapted plan, while the network sees the nominal
-    ones and must infer the adaptation from what it senses). The teacher is then gone: PPO trains the network alone,
+    (`Adapter.teacher_aim`: for STAF with `plan.adapt=nominal`, the targets of the geometrically adapted plan, while
+    the network sees the nominal ones and must infer the adaptation from what it senses). The teacher is then gone: PPO trains the network alone,
     a_i = psi(f_i) as printed (docs/staf.md)."""
     im = tc.imitation
     rng = np.random.default_rng([seed, 7])
@@ -154,10 +154,11 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
     history: list[dict[str, float]] = []
     start = 0
     warm: dict[str, float] = {}
-    if resume_from is None and tc.imitation.epochs > 0:
-        warm = imitate(policy, adapter, draw_scenarios, world_cfg, sensing, tc, seed)
     opt = torch.optim.Adam(policy.parameters(), lr=tc.lr, eps=1e-5)
     gen = torch.Generator().manual_seed(seed)
+    if resume_from is None and tc.imitation.epochs > 0:
+        warm = imitate(policy, adapter, draw_scenarios, world_cfg, sensing, tc, seed)
+        _save(out_dir, config_hash, 0, policy, opt, gen, [], warm)  # a kill after the warm start does not redo it
     if resume_from is not None:
         state = torch.load(resume_from, map_location="cpu", weights_only=True)
         policy.load_state_dict(state["policy"])
@@ -165,6 +166,7 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         torch.set_rng_state(state["torch_rng"])
         gen.set_state(state["minibatch_rng"])
         history, start = state["history"], int(state["iteration"])
+        warm = state.get("warm", {})
         log.info("resumed from iteration %d of %s", start, resume_from)
     bar = tqdm(range(start, tc.iterations), desc="train-ppo", unit="it", initial=start, total=tc.iterations, disable=None)
     for it in bar:
@@ -196,9 +198,15 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         history.append(row)
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")
         if (it + 1) % tc.checkpoint_every == 0 or it + 1 == tc.iterations:
-            save_payload(out_dir / STATE_FILE, {"config_hash": config_hash, "iteration": it + 1,
-                                              "policy": policy.state_dict(), "optimizer": opt.state_dict(),
-                                              "torch_rng": torch.get_rng_state(), "minibatch_rng": gen.get_state(),
-                                              "history": history})
+            _save(out_dir, config_hash, it + 1, policy, opt, gen, history, warm)
         on_iteration(history)
     return policy, history
+
+
+def _save(out_dir: Path, config_hash: str, iteration: int, policy: torch.nn.Module, opt: torch.optim.Optimizer,
+          gen: torch.Generator, history: list[dict[str, float]], warm: dict[str, float]) -> None:
+    """The whole training state after `iteration` iterations (0: after the warm start), an exact resume point."""
+    save_payload(out_dir / STATE_FILE, {"config_hash": config_hash, "iteration": iteration,
+                                      "policy": policy.state_dict(), "optimizer": opt.state_dict(),
+                                      "torch_rng": torch.get_rng_state(), "minibatch_rng": gen.get_state(),
+                                      "history": history, "warm": warm})

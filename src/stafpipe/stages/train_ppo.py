@@ -130,6 +130,8 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     finally:
         board.close()
     made_by = {"train_ppo": OmegaConf.to_container(cfg.train_ppo, resolve=True), "seed": int(cfg.seed),
+               "sensing": OmegaConf.to_container(cfg.sensing, resolve=True),
+               "world": OmegaConf.to_container(cfg.world, resolve=True),
                "training_maps": sorted({s.name for s in pool}),
                "commit": commit(), "iterations": len(history), "final": history[-1] if history else {}}
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
