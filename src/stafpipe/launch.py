@@ -27,6 +27,7 @@ from stafpipe.config import register_configs
 from stafpipe.errors import StafpipeError
 from stafpipe.io import atomic_write, write_json
 from stafpipe.paths import conf_dir
+from stafpipe.run_lock import RunDirLock
 
 log = logging.getLogger(__name__)
 
@@ -130,18 +131,32 @@ def stage_task(cfg: DictConfig) -> None:
     """Hydra's task function for every stage."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     started = time.perf_counter()
-    inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote
+    lock = RunDirLock(out_dir)
     try:
+        lock.acquire()  # refused: the directory is another run's, so nothing in it is touched
+        inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote
         outputs = stage_function(cfg.stage)(cfg, out_dir)
     except StafpipeError as exc:
-        _discard_if_empty(out_dir)
+        if lock.held:
+            lock.release()
+            _discard_if_empty(out_dir)
         if HydraConfig.get().mode == RunMode.MULTIRUN:
             raise  # the launcher reports it for this job of the sweep
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
     except BaseException:
-        _discard_if_empty(out_dir)
+        if lock.held:
+            lock.release()
+            _discard_if_empty(out_dir)
         raise
+    try:
+        _finish(cfg, out_dir, outputs, inputs, started)
+    finally:
+        lock.release()
+
+
+def _finish(cfg: DictConfig, out_dir: Path, outputs: list[Path], inputs: str, started: float) -> None:
+    """The resolved config, then the completion marker (last: its presence means the run is complete)."""
     resolved = OmegaConf.to_yaml(cfg, resolve=True)
     atomic_write(out_dir / "config.yaml", lambda tmp: tmp.write_text(resolved))
     write_json(
