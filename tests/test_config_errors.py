@@ -33,3 +33,26 @@ def test_bad_key_in_a_sweep_runs_no_job(workdir, capsys) -> None:
     assert code != 0
     assert "data.nope" in capsys.readouterr().err
     assert _results(workdir) == []
+
+
+@pytest.mark.parametrize(
+    ("override", "named"),
+    [
+        ("+eval.episode=3", "eval.episodes?"),  # appended misspelling: refused with the right name, not dropped
+        ("eval.goal_tolerance=inf", "eval.goal_tolerance"),  # would give SR 1.0
+        ("world.start_noise=nan", "world.start_noise"),
+        ("world.control_dt=-1", "world.control_dt"),  # would record a 0-step episode as finished
+        ("world.substeps=0", "world.substeps"),
+        ("world.collision_slop=-1", "world.collision_slop"),
+        ("sensing.radius=0", "sensing.radius"),
+        ("sensing.drop_prob=2", "sensing.drop_prob"),
+        ("sensing.range_error=-0.1", "sensing.range_error"),
+        ("seed=-1", "seed"),
+    ],
+)
+def test_every_stage_checks_the_shared_sections(workdir, capsys, override, named) -> None:
+    code = launch("eval", ["method=straight", "eval.episodes=1", "scenario.time_limit=2", override])
+    err = capsys.readouterr().err
+    assert code == 2 and named in err, err
+    assert _results(workdir) == []
+    assert not any(p.name == ".hydra" for p in workdir.rglob("*")), "a failed run left its directory behind"

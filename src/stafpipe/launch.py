@@ -24,6 +24,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe import __version__
 from stafpipe.config import register_configs
+from stafpipe.config.checks import check_run_config
 from stafpipe.errors import StafpipeError
 from stafpipe.io import atomic_write, write_json
 from stafpipe.paths import conf_dir
@@ -134,6 +135,7 @@ def stage_task(cfg: DictConfig) -> None:
     lock = RunDirLock(out_dir)
     try:
         lock.acquire()  # refused: the directory is another run's, so nothing in it is touched
+        check_run_config(cfg)
         inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote
         outputs = stage_function(cfg.stage)(cfg, out_dir)
     except StafpipeError as exc:

@@ -33,6 +33,14 @@ class SensingConfig:
     drop_prob: float = 0.0
     """Probability that a neighbour's message is lost in a control step (Zhu's communication faults)."""
 
+    def check(self, key: str = "sensing") -> None:
+        from stafpipe.errors import require
+
+        require(self.radius > 0, f"{key}.radius", "must be > 0", self.radius)
+        for name in ("position_noise", "range_error", "bearing_error_deg"):
+            require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
+        require(0 <= self.drop_prob <= 1, f"{key}.drop_prob", "must be in [0, 1]", self.drop_prob)
+
 
 class Observation(NamedTuple):
     """Observations of every robot; leading axes (worlds, robots) in a batch, (robots,) for one world."""

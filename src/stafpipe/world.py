@@ -42,6 +42,14 @@ class WorldConfig:
     start_noise: float = 0.05
     """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
 
+    def check(self, key: str = "world") -> None:
+        from stafpipe.errors import require
+
+        require(self.control_dt > 0, f"{key}.control_dt", "must be > 0", self.control_dt)
+        require(self.substeps >= 1, f"{key}.substeps", "must be >= 1", self.substeps)
+        require(self.collision_slop >= 0, f"{key}.collision_slop", "must be >= 0", self.collision_slop)
+        require(self.start_noise >= 0, f"{key}.start_noise", "must be >= 0", self.start_noise)
+
 
 @dataclass
 class Collision:
