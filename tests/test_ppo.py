@@ -105,8 +105,8 @@ def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
     policy, made_by = load_policy(run / "policy.pt", "dgnn")
     assert made_by["iterations"] == 2 and policy.cfg.hidden == 16
     board = tensorboard_scalars(run)
-    wanted = {"charts/success_rate", "charts/episode_return", "charts/collisions_per_episode", "losses/policy", "losses/value",
-              "losses/approx_kl", "losses/clipfrac", "charts/fps"}
+    wanted = {"charts/success_rate", "charts/episode_return", "charts/collisions_per_episode", "losses/policy",
+              "losses/value", "losses/approx_kl", "losses/clipfrac", "charts/fps"}
     assert wanted <= set(board), wanted - set(board)
     assert [step for step, _ in board["charts/success_rate"]] == [1, 2]
     # resume=true finds the finished state of the same config and has nothing left to do

@@ -60,7 +60,8 @@ def test_train_high_stage_writes_checkpoint_losses_and_curves(workdir) -> None:
     assert (run / "loss_curves.png").stat().st_size > 0
     board = tensorboard_scalars(run)
     assert {"train/total", "train/adjacency", "val/balance", "val/goal"} <= set(board)
-    assert board["train/total"] == [(1, pytest.approx(losses.train_total[0])), (2, pytest.approx(losses.train_total[1]))]
+    want = [(1, pytest.approx(losses.train_total[0])), (2, pytest.approx(losses.train_total[1]))]
+    assert board["train/total"] == want
 
 
 def test_train_high_on_a_generated_file_and_bad_inputs(workdir) -> None:

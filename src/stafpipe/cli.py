@@ -98,7 +98,8 @@ def run(
 @app.command()
 def inspect(
     file: str = typer.Argument(..., help="An episode's MCAP file."),
-    recover: bool = typer.Option(False, "--recover", help="Write FILE.recovered.mcap with every intact chunk's records (a partial episode)."),
+    recover: bool = typer.Option(
+        False, "--recover", help="Write FILE.recovered.mcap with every intact chunk's records (a partial episode)."),
 ) -> None:
     """Summarise an episode's MCAP log and recompute its metrics from the log alone."""
     from stafpipe.episode_log import recover as recover_log

@@ -84,7 +84,8 @@ def _resync(data: bytes, start: int) -> int | None:
         rec = _record_at(data, q)
         if rec is not None:
             op, end = rec
-            if op == Opcode.DATA_END and end - q == 9 + 4 and data[end : end + 1] in (b"", *[bytes([o]) for o in _OPCODES]):
+            follows = data[end : end + 1]  # a DataEnd is followed by the summary's first record or the Footer
+            if op == Opcode.DATA_END and end - q == 9 + 4 and (not follows or follows[0] in _OPCODES):
                 return q
             if op == Opcode.CHUNK and _chunk_records(data, q, end) is not None:
                 return q
@@ -117,8 +118,9 @@ def intact_records(data: bytes) -> Scan:
         if op == Opcode.CHUNK:
             scan.chunks += 1
         elif op in (Opcode.SCHEMA, Opcode.CHANNEL):  # outside chunks: no CRC of their own (the data section's)
+            kind = Schema if op == Opcode.SCHEMA else Channel
             try:
-                records = [(Schema if op == Opcode.SCHEMA else Channel).read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))]
+                records = [kind.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))]
             except Exception:  # noqa: BLE001 - a damaged record fails in many ways
                 scan.damaged.append(Damage(pos, "a schema or channel record does not parse"))
         for r in records or []:

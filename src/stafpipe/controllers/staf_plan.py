@@ -425,7 +425,8 @@ class StafPlan:
     def expected(self) -> np.ndarray:
         """(n, n) d_ij of R^adp (STAF Sec. 3): the distance between two robots' targets, i.e. between their slots in
         their subteam's formation (shrunk with adapt=geometric, nominal with adapt=nominal; blended into a column in
-        single file) or, at the regroup, between their targets sliding to the goal slots. Only same-subteam pairs are used."""
+        single file) or, at the regroup, between their targets sliding to the goal slots. Only same-subteam pairs are
+        used."""
         return np.linalg.norm(self.targets[:, None] - self.targets[None], axis=-1)
 
     def drain_events(self) -> list[tuple[str, list[int], str]]:

@@ -127,8 +127,9 @@ class StafAdapter(Adapter):
         self.plans = [StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width,
                                self.divide) for t in teams]
         shadow = dataclasses.replace(self.plan_cfg, adapt="geometric")
+        privileged = teacher and self.plan_cfg.adapt != "geometric"  # else the teacher's aim is the plan's own
         self.shadows = [StafPlan(shadow, t.scenario, t.template, t.goal, self._centred(t), t.passage_width,
-                                 self.divide) for t in teams] if teacher and self.plan_cfg.adapt != "geometric" else []
+                                 self.divide) for t in teams] if privileged else []
 
     def step(self, obs: Observation, dt: float) -> Step:
         if self.shadows:

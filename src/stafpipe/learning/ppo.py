@@ -114,8 +114,8 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
     then (`imitation.dagger` rounds, DAgger: Ross, Gordon and Bagnell, AISTATS 2011) on states the network itself
     visits, labelled by the teacher, all samples kept. The teacher may see more than the network
     (`Adapter.teacher_aim`: for STAF with `plan.adapt=nominal`, the targets of the geometrically adapted plan, while
-    the network sees the nominal ones and must infer the adaptation from what it senses). The teacher is then gone: PPO trains the network alone,
-    a_i = psi(f_i) as printed (docs/staf.md)."""
+    the network sees the nominal ones and must infer the adaptation from what it senses). The teacher is then gone:
+    PPO trains the network alone, a_i = psi(f_i) as printed (docs/staf.md)."""
     im = tc.imitation
     rng = np.random.default_rng([seed, 7])
     opt = torch.optim.Adam(policy.parameters(), lr=im.lr)
