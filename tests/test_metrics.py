@@ -5,7 +5,16 @@ import pytest
 
 from stafpipe.formations import formation_slots, place
 from stafpipe.integrity import circle_integrity, formation_integrity, line_integrity, v_integrity, wedge_shape_integrity
-from stafpipe.metrics import MetricContext, Trajectory, cfi, connectivity, episode_metrics, success_rate, travel_time
+from stafpipe.metrics import (
+    MetricContext,
+    Trajectory,
+    cfi,
+    cfi_printed,
+    connectivity,
+    episode_metrics,
+    success_rate,
+    travel_time,
+)
 
 
 @pytest.mark.parametrize("n", [3, 4, 7, 10])
@@ -61,6 +70,16 @@ def test_cfi_gap_band() -> None:
     assert cfi(np.array([2.0]), eps, eta=2.0, sigma=0.1) == pytest.approx(1.0)
     assert cfi(np.array([2.15]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5 * 0.5 + 0.5)
     assert cfi(np.array([3.0]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5)
+
+
+def test_cfi_printed_gap_term_as_printed() -> None:
+    eps = np.array([1.0])
+    # r = diameter / 2; the printed term peaks (1) at r = eta +- sigma and is 0 at r = eta (sigma away from both)
+    assert cfi_printed(np.array([2 * 2.1]), eps, eta=2.0, sigma=0.1) == pytest.approx(1.0)
+    assert cfi_printed(np.array([2 * 1.9]), eps, eta=2.0, sigma=0.1) == pytest.approx(1.0)
+    assert cfi_printed(np.array([2 * 2.0]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5)
+    assert cfi_printed(np.array([2 * 2.05]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5 * 0.5 + 0.5)
+    assert cfi_printed(np.array([2.0]), eps, eta=2.0, sigma=0.1) == pytest.approx(0.5)  # far off: clipped at 0
 
 
 def test_connectivity_of_a_line_graph() -> None:

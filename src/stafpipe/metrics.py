@@ -150,6 +150,16 @@ def cfi(diameter: np.ndarray, epsilon: np.ndarray, eta: float, sigma: float, w: 
     return float(np.mean(w * gap + (1.0 - w) * epsilon))
 
 
+def cfi_printed(diameter: np.ndarray, epsilon: np.ndarray, eta: float, sigma: float, w: float = CFI_WEIGHT) -> float:
+    """CFI with the gap term exactly as printed (STAF Sec. 4 / App. D), r the subteam's maximum radius (diameter / 2)
+    against eta: w (1 - sigma^-1 min(|r - (eta + sigma)|, |r - (eta - sigma)|)) + (1 - w) epsilon, the gap term
+    clipped to [0, 1] (unclipped it goes far below 0). Reported beside `cfi` so that both readings can be compared
+    (docs/metrics.md)."""
+    r = diameter / 2.0
+    gap = 1.0 - np.minimum(np.abs(r - (eta + sigma)), np.abs(r - (eta - sigma))) / sigma
+    return float(np.mean(w * np.clip(gap, 0.0, 1.0) + (1.0 - w) * epsilon))
+
+
 def connectivity(positions: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Per sample: number of undirected links within `radius` and algebraic connectivity lambda2 of that graph."""
     links, lam2 = [], []
@@ -193,5 +203,7 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     }
     for sigma in CFI_SIGMAS:
         out[f"cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
+    for sigma in CFI_SIGMAS:
+        out[f"cfi_printed_{sigma:g}"] = cfi_printed(diam, eps, eta, sigma)
     out.update(subteam_metrics(traj, ctx))
     return out
