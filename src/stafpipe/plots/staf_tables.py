@@ -27,7 +27,8 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
     ("staf", "wedge"): (100.00, 69.30, 80.52, 80.51, 80.50),
     ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
 }
-METRICS = ("sr", "tt", "cfi_0.5", "cfi_0.1", "cfi_0.01", "tt_ratio", "collisions")
+METRICS = ("sr", "tt", "cfi_0.5", "cfi_0.1", "cfi_0.01", "cfi_printed_0.5", "cfi_printed_0.1", "cfi_printed_0.01",
+           "tt_ratio", "collisions")
 GROUP = ["run", "method", "label", "formation", "n", "drive", "scenario", "paper_cell"]
 
 
@@ -68,7 +69,8 @@ def _cell(mean: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
 def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
     """The table as Markdown: ours (mean ± 95 % CI; SR and CFI in %) and the paper's value in brackets."""
     head = ["method", "scenario", "eta m", "formation", "n", "drive", "episodes", "SR %", "TT s", "CFI 0.5 %",
-            "CFI 0.1 %", "CFI 0.01 %", "TT / bound", "collisions", "all robots ok"]
+            "CFI 0.1 %", "CFI 0.01 %", "CFI as printed 0.5 / 0.1 / 0.01 %", "TT / bound", "collisions",
+            "all robots ok"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in table.iterrows():
         eta = r.get("eta", math.nan)
@@ -81,6 +83,8 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         cells += [_cell(r.get(f"cfi_{s}", math.nan), r.get(f"cfi_{s}_ci95", math.nan), 100) for s in ("0.5", "0.1", "0.01")]
         if ref is not None:
             cells = [f"{c} [{p:.1f}]" for c, p in zip(cells, ref, strict=True)]
+        printed = [r.get(f"cfi_printed_{s}", math.nan) for s in ("0.5", "0.1", "0.01")]  # means; CIs in table.csv
+        cells.append(" / ".join(f"{100 * v:.1f}" for v in printed) if np.all(np.isfinite(printed)) else "-")
         cells += [_cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
                   _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
                   f"{100 * r['all_succeeded']:.0f} %"]
