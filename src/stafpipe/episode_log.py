@@ -176,7 +176,7 @@ def recover(src: str | Path, dst: str | Path) -> tuple[int, int, list[Damage]]:
         raise LogError(f"{src}: no such file")
     data = src.read_bytes()
     scan = intact_records(data)
-    damage = check(data)
+    damage = check(data, scan)
     messages = [m for m in scan.messages if m.channel_id in scan.channels]
     if not messages:
         raise LogError(f"{src}: no complete message could be recovered")

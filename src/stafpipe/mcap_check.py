@@ -63,6 +63,21 @@ def _unreadable(data: bytes, pos: int) -> str:
     return f"unknown record opcode {data[pos]}"
 
 
+def _definition(data: bytes, pos: int, end: int) -> Schema | Channel:
+    """The Schema or Channel record at `pos` (outside chunks: no CRC of its own, the data section's covers it)."""
+    kind = Schema if data[pos] == Opcode.SCHEMA else Channel
+    return kind.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
+
+
+def _footer(data: bytes) -> tuple[int, int, int] | None:
+    """(offset of the Footer record, summary_start, summary_crc), or None where the file has no Footer there."""
+    footer = len(data) - 8 - _FOOTER
+    if footer < 8 or data[-8:] != MAGIC or data[footer] != Opcode.FOOTER:
+        return None
+    summary_start, _, summary_crc = struct.unpack_from("<QQI", data, footer + 9)
+    return footer, summary_start, summary_crc
+
+
 def _chunk_records(data: bytes, pos: int, end: int) -> list[McapRecord] | None:
     """The records of the chunk at `pos`, or None where it does not parse or fails its CRC."""
     try:
@@ -117,10 +132,9 @@ def intact_records(data: bytes) -> Scan:
             break
         if op == Opcode.CHUNK:
             scan.chunks += 1
-        elif op in (Opcode.SCHEMA, Opcode.CHANNEL):  # outside chunks: no CRC of their own (the data section's)
-            kind = Schema if op == Opcode.SCHEMA else Channel
+        elif op in (Opcode.SCHEMA, Opcode.CHANNEL):
             try:
-                records = [kind.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))]
+                records = [_definition(data, pos, end)]
             except Exception:  # noqa: BLE001 - a damaged record fails in many ways
                 scan.damaged.append(Damage(pos, "a schema or channel record does not parse"))
         for r in records or []:
@@ -139,8 +153,10 @@ def seal_data_crc(f: "io.BufferedRandom") -> None:
     writer leaves it 0, "not computed", so a flipped byte between chunks would go unseen)."""
     f.seek(0)
     data = f.read()
-    footer = len(data) - 8 - _FOOTER
-    summary_start = struct.unpack_from("<Q", data, footer + 9)[0] if data[footer] == Opcode.FOOTER else 0
+    found = _footer(data)
+    if found is None:
+        raise ValueError("no Footer record at the end")
+    footer, summary_start, _ = found
     data_end = (summary_start or footer) - 13
     if data_end < 8 or data[data_end] != Opcode.DATA_END:
         raise ValueError("no DataEnd record before the summary")
@@ -153,21 +169,22 @@ def _summary_definitions(data: bytes, pos: int, scan: Scan) -> None:
     damaged; a damaged summary is reported by `check`, not here."""
     while (rec := _record_at(data, pos)) is not None and rec[0] != Opcode.FOOTER:
         op, end = rec
-        try:
-            if op == Opcode.SCHEMA:
-                schema = Schema.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
-                scan.schemas.setdefault(schema.id, schema)
-            elif op == Opcode.CHANNEL:
-                channel = Channel.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
-                scan.channels.setdefault(channel.id, channel)
-        except Exception:  # noqa: BLE001
-            return
+        if op in (Opcode.SCHEMA, Opcode.CHANNEL):
+            try:
+                record = _definition(data, pos, end)
+            except Exception:  # noqa: BLE001
+                return
+            if isinstance(record, Schema):
+                scan.schemas.setdefault(record.id, record)
+            else:
+                scan.channels.setdefault(record.id, record)
         pos = end
 
 
-def check(data: bytes) -> list[Damage]:
-    """Every damage in an MCAP file's bytes: magic, chunk CRCs, the data section's and the summary's CRC."""
-    scan = intact_records(data)
+def check(data: bytes, scan: Scan | None = None) -> list[Damage]:
+    """Every damage in an MCAP file's bytes: magic, chunk CRCs, the data section's and the summary's CRC (`scan`:
+    `intact_records(data)` if the caller has it already)."""
+    scan = scan if scan is not None else intact_records(data)
     damage = list(scan.damaged)
     if scan.data_end is None:
         damage.append(Damage(len(data), "no DataEnd record: the file is truncated"))
@@ -180,11 +197,11 @@ def check(data: bytes) -> list[Damage]:
     if len(data) < 8 + _FOOTER or data[-8:] != MAGIC:
         damage.append(Damage(max(0, len(data) - 8), "no closing MCAP magic: the file is truncated or damaged"))
         return damage
-    footer = len(data) - 8 - _FOOTER
-    if data[footer] != Opcode.FOOTER:
-        damage.append(Damage(footer, "no Footer record"))
+    found = _footer(data)
+    if found is None:
+        damage.append(Damage(len(data) - 8 - _FOOTER, "no Footer record"))
         return damage
-    summary_start, _, summary_crc = struct.unpack_from("<QQI", data, footer + 9)
+    footer, summary_start, summary_crc = found
     if summary_start > footer or (summary_start and summary_start < (scan.data_end or 0)):
         damage.append(Damage(footer, "the Footer's summary offset is out of range"))
     elif summary_crc != 0 and summary_crc != zlib.crc32(data[summary_start or footer : len(data) - 8 - 4]):

@@ -26,11 +26,11 @@ def _alive(holder: str) -> bool:
     if host != socket.gethostname() or not pid.isdigit():
         return True  # cannot check another host's process: respect the lock
     try:
-        os.kill(int(pid), 0)
+        os.kill(int(pid), 0)  # signal 0: only asks whether the process exists (PermissionError: it does)
     except ProcessLookupError:
         return False
     except PermissionError:
-        return True
+        pass
     return True
 
 

@@ -15,6 +15,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from stafpipe.metrics import CFI_SIGMAS
+
 # STAF Table 1 (Gazebo, 10 robots, corridor): SR %, TT s, CFI % at sigma < 0.5, 0.1, 0.01
 PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = {
     ("dgnn", "circle"): (100.00, 68.70, 60.41, 58.91, 58.91),
@@ -27,8 +29,8 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
     ("staf", "wedge"): (100.00, 69.30, 80.52, 80.51, 80.50),
     ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
 }
-METRICS = ("sr", "tt", "cfi_0.5", "cfi_0.1", "cfi_0.01", "cfi_printed_0.5", "cfi_printed_0.1", "cfi_printed_0.01",
-           "tt_ratio", "collisions")
+METRICS = ("sr", "tt", *(f"cfi_{s:g}" for s in CFI_SIGMAS), *(f"cfi_printed_{s:g}" for s in CFI_SIGMAS), "tt_ratio",
+           "collisions")
 GROUP = ["run", "method", "label", "formation", "n", "drive", "scenario", "paper_cell"]
 
 
@@ -80,10 +82,10 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and papers_cell else None
         cells = [_cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
                  _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan))]
-        cells += [_cell(r.get(f"cfi_{s}", math.nan), r.get(f"cfi_{s}_ci95", math.nan), 100) for s in ("0.5", "0.1", "0.01")]
+        cells += [_cell(r.get(f"cfi_{s:g}", math.nan), r.get(f"cfi_{s:g}_ci95", math.nan), 100) for s in CFI_SIGMAS]
         if ref is not None:
             cells = [f"{c} [{p:.1f}]" for c, p in zip(cells, ref, strict=True)]
-        printed = [r.get(f"cfi_printed_{s}", math.nan) for s in ("0.5", "0.1", "0.01")]  # means; CIs in table.csv
+        printed = [r.get(f"cfi_printed_{s:g}", math.nan) for s in CFI_SIGMAS]  # means; CIs in table.csv
         cells.append(" / ".join(f"{100 * v:.1f}" for v in printed) if np.all(np.isfinite(printed)) else "-")
         cells += [_cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
                   _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
