@@ -128,3 +128,19 @@ def test_bad_policy_checkpoint_and_settings_are_refused(workdir) -> None:
     assert launch("eval", ["method=staf", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
     assert launch("eval", ["method=staf", "method.plan.speed=0", "eval.episodes=1"]) == 2
     assert not job_dirs(workdir)
+
+
+def test_init_from_starts_at_the_loaded_weights_and_refuses_other_settings(tmp_path) -> None:
+    from stafpipe.errors import StafpipeError
+    from stafpipe.learning.checkpoint import save_policy
+
+    trained, _ = _train(tmp_path / "a", iterations=1)
+    saved = save_policy(tmp_path / "policy.pt", "dgnn", trained, {})
+    # no PPO step can change the weights at lr ~0: the run ends where it started, at the loaded network
+    tuned, _ = _train(tmp_path / "b", iterations=1, init_from=str(saved), lr=1e-30)
+    assert _same(trained, tuned)
+    fresh, _ = _train(tmp_path / "c", iterations=1, lr=1e-30)
+    assert not _same(trained, fresh)
+    with pytest.raises(StafpipeError, match="train_ppo.init_from.*hidden"):
+        ppo.train_ppo(TrainPPOConfig(init_from=str(saved), policy=PolicyConfig(hidden=8)), lambda rng, k: [], WorldConfig(),
+                      SensingConfig(), 0.3, 4, tmp_path / "d", "h", None, lambda h: None)

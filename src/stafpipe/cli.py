@@ -119,3 +119,26 @@ def inspect(
     typer.echo(report)
     if not equal:
         raise typer.Exit(1)
+
+
+@app.command()
+def export(
+    network: str = typer.Argument(..., help="staf (STAF's GNN + low level), dgnn (the DGNN policy) or high (STAF's "
+                                  "deep graph cut)."),
+    checkpoint: str = typer.Option("", "--checkpoint", help="A policy.pt / high-level checkpoint; empty: the shipped one."),
+    output: str = typer.Option("", "--output", help="The ONNX file to write; empty: outputs/export/NETWORK.onnx."),
+) -> None:
+    """Write a learned network as ONNX for a robot (inputs, outputs and frames: docs/export.md)."""
+    from pathlib import Path
+
+    from stafpipe.export_onnx import export as export_network
+
+    try:
+        path = export_network(network, checkpoint, Path(output or f"outputs/export/{network}.onnx"))
+    except StafpipeError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    except ModuleNotFoundError as exc:
+        typer.echo(f"error: export needs the onnx extra ({exc.name} is missing): pip install 'stafpipe[onnx]'", err=True)
+        raise typer.Exit(2) from None
+    typer.echo(f"wrote {path}")

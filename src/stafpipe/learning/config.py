@@ -124,6 +124,10 @@ class TrainPPOConfig:
     `eval/success_rate` curve, comparable with `stafpipe eval method=dgnn`. 0 switches it off."""
     checkpoint_every: int = 10
     """Iterations between checkpoints of the full training state."""
+    init_from: str = ""
+    """A policy checkpoint (`policy.pt` of an earlier run, or a shipped one) whose weights, action std included,
+    start this run instead of fresh ones: fine-tuning. Its method and `policy` settings must equal this run's. With
+    `imitation.epochs` > 0 every imitation round is then a DAgger round (the loaded network drives)."""
     resume: bool = False
     """Continue from the newest state of the same config (this run directory first, then outputs/train-ppo/)."""
     threads: int = 2

@@ -9,6 +9,7 @@ resume point: a resumed run ends with the same weights as an uninterrupted one.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Callable
@@ -19,6 +20,7 @@ import torch
 from tqdm import tqdm
 
 from stafpipe.controllers.base import TeamInfo
+from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS, Adapter
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.learning.rollout import Rollout, collect, commands, gae
@@ -123,7 +125,7 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
     sets: list[tuple[torch.Tensor, ...]] = []  # one per batch of episodes: its worlds share the team size
     loss = torch.zeros(())
     for round_ in range(1 + im.dagger):
-        driver = None if round_ == 0 else policy
+        driver = policy if round_ > 0 or tc.init_from else None  # a loaded network drives from the first round
         sets += [_teacher_samples(driver, adapter, draw(rng, tc.worlds), world_cfg, sensing, tc, rng)
                  for _ in range(im.rollouts)]
         for _ in range(im.epochs):
@@ -151,6 +153,8 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
     torch.manual_seed(seed)
     adapter = ADAPTERS[tc.method](tc.policy, tc.reward, tc.plan, sensing.radius)
     policy = adapter.network(tc.policy)
+    if tc.init_from and resume_from is None:
+        policy.load_state_dict(initial_weights(tc).state_dict())
     history: list[dict[str, float]] = []
     start = 0
     warm: dict[str, float] = {}
@@ -201,6 +205,19 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
             _save(out_dir, config_hash, it + 1, policy, opt, gen, history, warm)
         on_iteration(history)
     return policy, history
+
+
+def initial_weights(tc: TrainPPOConfig) -> torch.nn.Module:
+    """The network of `train_ppo.init_from`, refused where its method or policy settings differ from this run's."""
+    from stafpipe.learning.checkpoint import load_policy
+
+    loaded, _ = load_policy(tc.init_from, tc.method)  # names the file where it is missing or of another method
+    ours, theirs = dataclasses.asdict(tc.policy), dataclasses.asdict(loaded.cfg)
+    differ = {k: (theirs[k], ours[k]) for k in ours if k != "init_log_std" and ours[k] != theirs.get(k)}
+    if differ:
+        raise StafpipeError(f"train_ppo.init_from: {tc.init_from} was trained with other train_ppo.policy settings "
+                            f"(checkpoint, this run): {differ}")
+    return loaded
 
 
 def _save(out_dir: Path, config_hash: str, iteration: int, policy: torch.nn.Module, opt: torch.optim.Optimizer,

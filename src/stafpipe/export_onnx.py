@@ -1,0 +1,145 @@
+"""`stafpipe export`: a learned network as an ONNX file a robot can run without torch or stafpipe (docs/export.md).
+
+Three networks, one team (one world) per call, any number of robots (the `robots` axis is dynamic):
+- `staf`: STAF's intermediate GNN phi and low level psi (STAF, Sec. 3): own (n, 6), edge (n, n, 9), mask (n, n) ->
+  action (n, 2), the mean action a_i = psi(f_i) (learning/staf_net.py).
+- `dgnn`: the DGNN baseline's policy (Blumenkamp et al., ICRA 2022): own (n, 7), edge (n, n, 5), mask (n, n) ->
+  action (n, 2) (learning/dgnn.py).
+- `high`: STAF's deep graph cut (Sec. 3): x (n, F), adjacency (n, n), m () -> assignment (n, m_max), the soft
+  subteam assignment Y whose row argmax is each robot's subteam (highlevel/model.py), in the dense form.
+Only the deterministic parts are exported: no critic, no sampling. The file's metadata carries the checkpoint's
+`made_by` record and the input layout, so a user can tell which training run a file came from.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import logging
+import warnings
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from stafpipe.errors import StafpipeError
+from stafpipe.highlevel.model import DeepGraphCut
+from stafpipe.io import atomic_write
+
+log = logging.getLogger(__name__)
+NETWORKS = ("staf", "dgnn", "high")
+OPSET = 18
+
+
+class PolicyMean(nn.Module):
+    """The execution part of a learned policy: action means (n, 2) of one team."""
+
+    def __init__(self, policy: nn.Module):
+        super().__init__()
+        self.policy = policy
+
+    def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        return self.policy.act(own, edge, mask)
+
+
+class DenseGraphCut(nn.Module):
+    """DeepGraphCut's forward pass for one team on a dense adjacency (as NumpyGraphCut computes it), with the same
+    weights: attention over j with adjacency[i, j] (j sends to i), heads averaged, tau on [h || one_hot(m)]."""
+
+    def __init__(self, model: DeepGraphCut):
+        super().__init__()
+        self.model = model
+
+    def forward(self, x: torch.Tensor, adjacency: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
+        cfg, model = self.model.cfg, self.model
+        n = x.shape[0]
+        h = model.w_v(x)
+        for k, layer in enumerate(model.layers):
+            wa = layer.w_a(h).view(n, cfg.heads, cfg.hidden)
+            s_i = (wa * layer.a[:, : cfg.hidden]).sum(-1).T  # (H, n)
+            s_j = (wa * layer.a[:, cfg.hidden :]).sum(-1).T
+            scores = layer.act(s_i[:, :, None] + s_j[:, None, :])  # (H, i, j)
+            scores = scores.masked_fill(~adjacency[None], -torch.inf)
+            # a robot without neighbours: all -inf -> its alpha row is 0 (as the sparse form's empty sum)
+            peak = scores.amax(-1, keepdim=True).clamp_min(-1e30)
+            e = torch.exp(scores - peak)
+            alpha = e / e.sum(-1, keepdim=True).clamp_min(1e-30)
+            wh = layer.w_h(h).view(n, cfg.heads, cfg.hidden).transpose(0, 1)  # (H, n, W)
+            h = (wh + alpha @ wh).mean(0)
+            if k + 1 < len(model.layers):
+                h = torch.relu(h)
+        slots = torch.arange(cfg.m_max)
+        one_hot = (slots == m - 1).to(x.dtype).expand(n, cfg.m_max)
+        logits = model.tau(torch.cat([h, one_hot], dim=1))
+        return torch.softmax(logits.masked_fill(slots[None, :] >= m, -torch.inf), dim=1)
+
+
+def example_inputs(network: str, module: nn.Module, n: int = 5) -> dict[str, torch.Tensor]:
+    """Inputs of the right shapes and types for `network` (random values; a team of n robots)."""
+    gen = torch.Generator().manual_seed(0)
+    if network == "high":
+        cfg = module.model.cfg
+        adjacency = torch.rand(n, n, generator=gen) < 0.6
+        adjacency = (adjacency | adjacency.T) & ~torch.eye(n, dtype=torch.bool)
+        return {"x": torch.randn(n, 2 * len(cfg.features), generator=gen), "adjacency": adjacency,
+                "m": torch.tensor(min(2, cfg.m_max), dtype=torch.int64)}
+    from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
+
+    own, edge = (STAF_OWN, STAF_EDGE) if network == "staf" else (OWN, EDGE)
+    mask = (torch.rand(n, n, generator=gen) < 0.6) & ~torch.eye(n, dtype=torch.bool)
+    return {"own": torch.randn(n, own, generator=gen), "edge": torch.randn(n, n, edge, generator=gen) * mask[..., None],
+            "mask": mask}
+
+
+def load_network(network: str, checkpoint: str = "") -> tuple[nn.Module, dict]:
+    """The exportable module of `network` from `checkpoint` (empty: the shipped one) and the checkpoint's record."""
+    if network not in NETWORKS:
+        raise StafpipeError(f"export: network must be one of {list(NETWORKS)}, got {network!r}")
+    if network == "high":
+        from stafpipe.highlevel.checkpoint import load_checkpoint
+
+        model, made_by = load_checkpoint(checkpoint)
+        return DenseGraphCut(model).eval(), made_by
+    from stafpipe.learning.checkpoint import load_policy
+
+    policy, made_by = load_policy(checkpoint, network)
+    return PolicyMean(policy).eval(), made_by
+
+
+def export(network: str, checkpoint: str, out: Path) -> Path:
+    """Write `network` of `checkpoint` to `out` as ONNX (atomically), with a dynamic robot count."""
+    import onnx  # the `onnx` extra: onnx, onnxscript (torch's exporter)
+
+    module, made_by = load_network(network, checkpoint)
+    inputs = example_inputs(network, module)
+    robots = torch.export.Dim("robots", min=2, max=4096)
+    shapes = {name: ({0: robots} if value.dim() == 2 and name in ("own", "x") else
+                     {0: robots, 1: robots} if value.dim() >= 2 else {}) for name, value in inputs.items()}
+    output = "assignment" if network == "high" else "action"
+
+    def write(tmp: Path) -> None:
+        quiet = logging.getLogger("torch.onnx")
+        level = quiet.level
+        quiet.setLevel(logging.ERROR)
+        try:  # the exporter's progress lines, notes on axis names and deprecations: not ours to show
+            with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
+                warnings.simplefilter("ignore")
+                program = torch.onnx.export(module, tuple(inputs.values()), dynamo=True, input_names=list(inputs),
+                                            output_names=[output], dynamic_shapes=shapes, opset_version=OPSET,
+                                            verbose=False)
+        finally:
+            quiet.setLevel(level)
+        model = program.model_proto
+        meta = {"stafpipe.network": network, "stafpipe.checkpoint": checkpoint or "shipped",
+                "stafpipe.made_by": json.dumps(made_by, sort_keys=True, default=str)}
+        for key, value in meta.items():
+            entry = model.metadata_props.add()
+            entry.key, entry.value = key, value
+        onnx.checker.check_model(model)
+        onnx.save(model, str(tmp))
+
+    try:
+        return atomic_write(out, write)
+    except OSError as exc:
+        raise StafpipeError(f"export: cannot write {out}: {exc.strerror or exc}") from None
