@@ -47,6 +47,8 @@ def obstacle_distance(points: np.ndarray, scenario: Scenario) -> np.ndarray:
         d[start : start + 20_000] = (np.linalg.norm(chunk[:, None, :] - cp, axis=-1) - r).min(axis=1)
     for poly in scenario.polygons:
         d[MplPath(poly).contains_points(points)] = 0.0
+    if scenario.occupancy is not None:  # inside a wall of a ROS map: its cells, not its outline, say so
+        d[scenario.occupancy.contains(points)] = 0.0
     return np.maximum(d, 0.0)
 
 

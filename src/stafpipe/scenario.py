@@ -16,7 +16,8 @@ from omegaconf import OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from stafpipe.errors import StafpipeError
-from stafpipe.formations import FORMATION_TYPES, formation_slots
+from stafpipe.formations import FORMATION_TYPES, formation_slots, place
+from stafpipe.occupancy import OccupancyGrid, load_map
 
 DRIVES = ("holonomic", "diff_drive")
 
@@ -71,6 +72,19 @@ class MovingObstacle:
 
 
 @dataclass
+class OccupancySpec:
+    """Static obstacles from a ROS `map_server` map (occupancy.py, docs/scenarios.md), added to `obstacles`."""
+
+    map: str = ""
+    """The map's YAML file; a relative path is relative to the scenario file (for a built-in scenario composed by
+    Hydra, to conf/scenario/). Empty: no map."""
+    unknown: str = "occupied"
+    """What cells of unknown occupancy are: `occupied` (safe) or `free`."""
+    simplify: float = 0.0
+    """How far (m) the simplified wall outline may stray from the cells' edges; 0: one cell."""
+
+
+@dataclass
 class ScenarioConfig:
     """A scenario (group `scenario`): inline fields, or `path` to a scenario YAML file that replaces them."""
 
@@ -78,6 +92,7 @@ class ScenarioConfig:
     path: str | None = None
     world: WorldBounds = field(default_factory=WorldBounds)
     obstacles: list[Any] = field(default_factory=list)
+    occupancy: OccupancySpec = field(default_factory=OccupancySpec)
     moving_obstacles: list[MovingObstacle] = field(default_factory=list)
     reference_path: list[Any] = field(default_factory=list)
     """Optional waypoints for the formation centre (a leader's trajectory, Zhu's circular reference)."""
@@ -105,6 +120,8 @@ class Scenario:
     """Solid convex-or-not polygons (boxes included), each (k, 2), counter-clockwise."""
     capsules: list[Capsule]
     """Every static obstacle boundary as capsules: polygon edges (radius 0), circles, segments, world walls."""
+    occupancy: OccupancyGrid | None = None
+    """The occupied cells of `occupancy.map`, if any (its outline is among the capsules)."""
 
     @property
     def name(self) -> str:
@@ -218,10 +235,39 @@ def build_scenario(spec: ScenarioConfig) -> Scenario:
         if poly is not None:
             polygons.append(poly)
         capsules.extend(caps)
+    grid = None
+    if spec.occupancy.map:
+        grid = _map_obstacles(spec, capsules)
     w = spec.world
     corners = [(w.xmin, w.ymin), (w.xmax, w.ymin), (w.xmax, w.ymax), (w.xmin, w.ymax)]
     capsules.extend(Capsule(corners[i], corners[(i + 1) % 4], 0.0) for i in range(4))
-    return Scenario(spec, polygons, capsules)
+    return Scenario(spec, polygons, capsules, grid)
+
+
+def _map_obstacles(spec: ScenarioConfig, capsules: list[Capsule]) -> OccupancyGrid:
+    """Load `occupancy.map`, add its wall outline to `capsules`, refuse a team that starts or ends in a wall."""
+    occ = spec.occupancy
+    if occ.simplify < 0 or not math.isfinite(occ.simplify):
+        raise ScenarioError(f"occupancy.simplify must be >= 0, got {occ.simplify}")
+    grid = load_map(occ.map, occ.unknown)
+    capsules.extend(Capsule(a, b, 0.0) for a, b in grid.wall_segments(occ.simplify or grid.resolution))
+    t = spec.team
+    for key in ("start", "goal"):
+        centre = np.array(getattr(t, key), dtype=float)
+        slots = np.zeros((0, 2))
+        if t.n >= 2:  # the robots' slots, placed as World.reset places them
+            slots = place(formation_slots(t.formation, t.n, t.spacing, t.angle_deg), centre, math.radians(t.heading_deg))
+        hit = grid.contains(np.vstack([centre, slots]))
+        if hit.any():
+            where = "its centre" if hit[0] else f"robot {int(np.argmax(hit[1:]))}'s slot"
+            raise ScenarioError(f"team.{key} {centre.tolist()}: {where} lies in an occupied cell of map {occ.map}")
+    return grid
+
+
+def anchor_map(spec: ScenarioConfig, base: Path) -> None:
+    """Make a relative `occupancy.map` relative to `base` (the scenario file's directory)."""
+    if spec.occupancy.map and not Path(spec.occupancy.map).is_absolute():
+        spec.occupancy.map = str(base / spec.occupancy.map)
 
 
 def load_scenario_file(path: str | Path) -> ScenarioConfig:
@@ -239,6 +285,13 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
         raise ScenarioError(f"scenario file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
     spec: ScenarioConfig = OmegaConf.to_object(merged)  # type: ignore[assignment]
     spec.path = None
+    anchor_map(spec, path.parent)
+    if spec.occupancy.map and "world" not in raw:  # the map's extent is the world
+        try:
+            xmin, ymin, xmax, ymax = load_map(spec.occupancy.map, spec.occupancy.unknown).extent()
+        except StafpipeError as exc:
+            raise ScenarioError(f"scenario file {path}: {exc}") from None
+        spec.world = WorldBounds(xmin, ymin, xmax, ymax)
     return spec
 
 
@@ -251,6 +304,10 @@ def resolve_scenario(cfg: Any) -> Scenario:
             spec = OmegaConf.to_object(cfg) if OmegaConf.is_config(cfg) else cfg
         except OmegaConfBaseException as exc:
             raise ScenarioError(f"scenario: {str(exc).splitlines()[0]}") from None
+        if spec.occupancy.map and not Path(spec.occupancy.map).exists():
+            from stafpipe.paths import conf_dir
+
+            anchor_map(spec, conf_dir() / "scenario")  # a built-in scenario's map lies beside it
     try:
         return build_scenario(spec)
     except ScenarioError as exc:

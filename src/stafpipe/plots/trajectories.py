@@ -22,6 +22,16 @@ def draw_map(ax, scenario: Scenario) -> None:  # noqa: ANN001 (a matplotlib Axes
     """Static obstacles in grey: solid polygons, discs and thick segments; world walls as a thin frame."""
     for poly in scenario.polygons:
         ax.add_patch(Polygon(poly, closed=True, color=OBSTACLE_GREY, lw=0))
+    if scenario.occupancy is not None:  # a ROS map's occupied cells, in the map's frame
+        from matplotlib.colors import ListedColormap
+        from matplotlib.transforms import Affine2D
+
+        grid = scenario.occupancy
+        h, w = grid.occupied.shape
+        frame = Affine2D().rotate(grid.origin[2]).translate(*grid.origin[:2]) + ax.transData
+        ax.imshow(np.ma.masked_equal(grid.occupied.astype(np.int8), 0), origin="lower", interpolation="nearest",
+                  cmap=ListedColormap([OBSTACLE_GREY]), extent=(0, w * grid.resolution, 0, h * grid.resolution),
+                  transform=frame)
     for cap in scenario.capsules:
         a, b = np.asarray(cap.a), np.asarray(cap.b)
         if cap.radius <= 0:

@@ -1,0 +1,159 @@
+"""Static obstacles from a ROS occupancy map (the `map_server` format: a YAML file naming a PGM or PNG image).
+
+A scenario's `occupancy.map` names the map's YAML (docs/scenarios.md). Its fields, as `map_server` reads them:
+`image` (path relative to the YAML), `resolution` (m per cell), `origin` ([x, y, yaw] of the lower-left pixel),
+`occupied_thresh`, `free_thresh`, `negate`; `mode` trinary (default) or scale. A cell is occupied when its occupancy
+p = (255 - value) / 255 (value / 255 with `negate: 1`) exceeds `occupied_thresh`, free below `free_thresh`, unknown
+between: unknown cells count as occupied unless the scenario says `occupancy.unknown: free`.
+
+The occupied cells become polygons (shapely: the union of the cells, simplified by at most `occupancy.simplify`
+metres, one cell by default), whose rings become the scenario's wall segments; the raster itself answers "is this
+point inside an obstacle" (planning grid, start and goal checks), so walls of any thickness and rooms (holes) need no
+polygon decomposition.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from stafpipe.errors import StafpipeError
+
+IMAGE_SUFFIXES = (".pgm", ".png")
+
+
+class MapError(StafpipeError):
+    """A ROS map file that is missing or malformed; the message names the file and the field."""
+
+
+@dataclass
+class OccupancyGrid:
+    """Occupied cells of a map (row 0 at the bottom: y grows with the row) and where they lie in the world."""
+
+    occupied: np.ndarray
+    """(H, W) bool."""
+    resolution: float
+    origin: tuple[float, float, float]
+    """x, y of the lower-left corner of cell (0, 0) and the map's yaw (rad)."""
+    source: str
+
+    def extent(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of the map's cells in the world."""
+        h, w = self.occupied.shape
+        corners = self.to_world(np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]]) * self.resolution)
+        return (*corners.min(axis=0), *corners.max(axis=0))
+
+    def to_world(self, local: np.ndarray) -> np.ndarray:
+        ox, oy, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.stack([ox + c * local[..., 0] - s * local[..., 1], oy + s * local[..., 0] + c * local[..., 1]], -1)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """(P,) bool: the point lies in an occupied cell (points off the map: False)."""
+        ox, oy, yaw = self.origin
+        c, s = math.cos(yaw), math.sin(yaw)
+        dx, dy = points[:, 0] - ox, points[:, 1] - oy
+        col = np.floor((c * dx + s * dy) / self.resolution).astype(int)
+        row = np.floor((-s * dx + c * dy) / self.resolution).astype(int)
+        h, w = self.occupied.shape
+        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        out = np.zeros(len(points), dtype=bool)
+        out[inside] = self.occupied[row[inside], col[inside]]
+        return out
+
+    def wall_segments(self, simplify: float) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+        """Every edge of the simplified outline of the occupied region (outer rings and holes), in world metres."""
+        import shapely
+
+        rows, starts, ends = _runs(self.occupied)
+        cells = shapely.box(starts, rows, ends, rows + 1)  # one box per horizontal run of occupied cells
+        region = shapely.union_all(cells).simplify(simplify / self.resolution, preserve_topology=True)
+        segments = []
+        for poly in getattr(region, "geoms", [region]):
+            if poly.is_empty:
+                continue
+            for ring in [poly.exterior, *poly.interiors]:
+                xy = self.to_world(np.asarray(ring.coords) * self.resolution)
+                segments += [(tuple(map(float, xy[k])), tuple(map(float, xy[k + 1]))) for k in range(len(xy) - 1)]
+        return segments
+
+
+def _runs(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Row, first column and one-past-last column of every horizontal run of True cells."""
+    padded = np.zeros((occupied.shape[0], occupied.shape[1] + 2), dtype=np.int8)
+    padded[:, 1:-1] = occupied
+    step = np.diff(padded, axis=1)
+    r0, c0 = np.nonzero(step == 1)
+    r1, c1 = np.nonzero(step == -1)  # row-major order pairs each start with its end
+    assert np.array_equal(r0, r1)
+    return r0.astype(float), c0.astype(float), c1.astype(float)
+
+
+def _field(meta: dict[str, Any], key: str, where: str, default: Any = None) -> Any:
+    if key not in meta:
+        if default is None:
+            raise MapError(f"{where}: misses the field {key!r}")
+        return default
+    return meta[key]
+
+
+def _number(value: Any, where: str, low: float, high: float = math.inf, low_open: bool = False) -> float:
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or value < low or value > high or (low_open and value == low):
+        bound = f"{'>' if low_open else '>='} {low}" + (f" and <= {high}" if high < math.inf else "")
+        raise MapError(f"{where} must be a number {bound}, got {value!r}")
+    return float(value)
+
+
+def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
+    """Read a `map_server` map YAML and its image; every error names the file and the field."""
+    import yaml
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise MapError(f"occupancy.map: map file {path} does not exist")
+    try:
+        meta = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise MapError(f"map file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(meta, dict):
+        raise MapError(f"map file {path}: must be a mapping with image, resolution, origin, got {meta!r}")
+    where = f"map file {path}"
+    image = _field(meta, "image", where)
+    if not isinstance(image, str) or Path(image).suffix.lower() not in IMAGE_SUFFIXES:
+        raise MapError(f"{where}: image must name a {' or '.join(IMAGE_SUFFIXES)} file, got {image!r}")
+    image_path = path.parent / image
+    if not image_path.is_file():
+        raise MapError(f"{where}: image {image_path} does not exist")
+    resolution = _number(_field(meta, "resolution", where), f"{where}: resolution", 0.0, low_open=True)
+    origin = _field(meta, "origin", where)
+    if not isinstance(origin, list) or len(origin) not in (2, 3):
+        raise MapError(f"{where}: origin must be [x, y, yaw], got {origin!r}")
+    ox, oy, *yaw = (_number(v, f"{where}: origin[{k}]", -math.inf) for k, v in enumerate(origin))
+    occupied_thresh = _number(_field(meta, "occupied_thresh", where, 0.65), f"{where}: occupied_thresh", 0.0, 1.0)
+    free_thresh = _number(_field(meta, "free_thresh", where, 0.25), f"{where}: free_thresh", 0.0, 1.0)
+    if free_thresh > occupied_thresh:
+        raise MapError(f"{where}: free_thresh ({free_thresh}) must not exceed occupied_thresh ({occupied_thresh})")
+    negate = _field(meta, "negate", where, 0)
+    if negate not in (0, 1, True, False):
+        raise MapError(f"{where}: negate must be 0 or 1, got {negate!r}")
+    mode = _field(meta, "mode", where, "trinary")
+    if mode not in ("trinary", "scale"):
+        raise MapError(f"{where}: mode must be trinary or scale (raw maps are not supported), got {mode!r}")
+    if unknown not in ("occupied", "free"):
+        raise MapError(f"occupancy.unknown must be occupied or free, got {unknown!r}")
+    try:
+        with Image.open(image_path) as img:
+            gray = np.asarray(img.convert("L"), dtype=float)
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as exc:  # Pillow: a malformed header
+        raise MapError(f"{where}: image {image_path} cannot be read ({exc})") from None
+    p = gray / 255.0 if negate else (255.0 - gray) / 255.0
+    occupied = p > occupied_thresh
+    if unknown == "occupied":
+        occupied |= p >= free_thresh  # neither free nor occupied: unknown
+    return OccupancyGrid(occupied[::-1].copy(), resolution, (ox, oy, yaw[0] if yaw else 0.0), str(path))
