@@ -82,6 +82,9 @@ class ImitationConfig:
     """The teacher's gain: a step of min(1, gain x distance) of top speed towards the target."""
     noise: float = 0.3
     """Standard deviation of the noise added to the teacher's actions while collecting (states off its own way)."""
+    near_weight: float = 1.0
+    """Weight of the samples where the teacher brakes for a neighbour or an obstacle (its action differs from the
+    free proportional step) against 1 for the rest; 1: plain regression."""
     lr: float = 1e-3
     batch: int = 256
     """World-steps per minibatch."""
@@ -148,8 +151,8 @@ class TrainPPOConfig:
         from stafpipe.learning.teachers import TEACHERS
 
         require(im.teacher in TEACHERS, f"{key}.imitation.teacher", f"must be one of {list(TEACHERS)}", im.teacher)
-        require(im.gain > 0 and im.noise >= 0 and im.lr > 0, f"{key}.imitation", "gain > 0, noise >= 0, lr > 0",
-                (im.gain, im.noise, im.lr))
+        require(im.gain > 0 and im.noise >= 0 and im.lr > 0 and im.near_weight > 0, f"{key}.imitation",
+                "gain > 0, noise >= 0, lr > 0, near_weight > 0", (im.gain, im.noise, im.lr, im.near_weight))
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)

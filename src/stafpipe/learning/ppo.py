@@ -92,21 +92,24 @@ def _teacher_samples(policy: torch.nn.Module | None, adapter: Adapter, drawn: li
     worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
     obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, len(drawn))])
     adapter.begin(teams_of(drawn, worlds), teacher=True)
-    own, edge, mask, target = [], [], [], []
+    own, edge, mask, target, weight = [], [], [], [], []
     for _ in range(tc.episode_steps):
         f = adapter.step(obs, world_cfg.control_dt).features
-        act = teacher_actions(im.teacher, adapter.teacher_aim() - obs.position, obs, worlds.robot.radius,
-                              worlds.robot.max_speed, im.gain)
+        to_aim = adapter.teacher_aim() - obs.position
+        act = teacher_actions(im.teacher, to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
+        free = teacher_actions("proportional", to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
         for store, x in ((own, f.own), (edge, f.edge), (mask, f.mask)):
             store.append(torch.from_numpy(x))
         target.append(torch.from_numpy(act.astype(np.float32)))
+        # where the teacher brakes for a neighbour or a wall (its action is not the free step) the sample weighs more
+        weight.append(torch.from_numpy(np.where(np.abs(act - free).sum(-1) > 1e-6, im.near_weight, 1.0)).float())
         drive = act
         if policy is not None:
             with torch.no_grad():
                 drive = policy.act(own[-1], edge[-1], mask[-1]).numpy().astype(float)
         obs, _ = worlds.step(commands(drive + rng.normal(0.0, im.noise, act.shape), worlds.heading,
                                       worlds.robot.max_speed))
-    return tuple(torch.cat(x) for x in (own, edge, mask, target))
+    return tuple(torch.cat(x) for x in (own, edge, mask, target, weight))
 
 
 def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random.Generator, int], list[Drawn]],
@@ -130,11 +133,12 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
                  for _ in range(im.rollouts)]
         for _ in range(im.epochs):
             for k in torch.randperm(len(sets), generator=gen).tolist():
-                b_own, b_edge, b_mask, b_target = sets[k]
+                b_own, b_edge, b_mask, b_target, b_weight = sets[k]
                 order = torch.randperm(len(b_own), generator=gen)
                 for start in range(0, len(order), im.batch):
                     mb = order[start : start + im.batch]
-                    loss = ((policy.act(b_own[mb], b_edge[mb], b_mask[mb]) - b_target[mb]) ** 2).sum(-1).mean()
+                    err = ((policy.act(b_own[mb], b_edge[mb], b_mask[mb]) - b_target[mb]) ** 2).sum(-1)
+                    loss = err.mean() if im.near_weight == 1 else (err * b_weight[mb]).sum() / b_weight[mb].sum()
                     opt.zero_grad()
                     loss.backward()
                     opt.step()
