@@ -3,7 +3,7 @@ from typer.testing import CliRunner
 from stafpipe.cli import app
 
 runner = CliRunner()
-STAGES = ["generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot", "run", "inspect"]
+STAGES = ["generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot", "run", "inspect", "export"]
 
 
 def test_help_lists_every_stage() -> None:
@@ -13,11 +13,30 @@ def test_help_lists_every_stage() -> None:
         assert stage in result.output
 
 
+def test_every_stage_explains_its_overrides_groups_and_examples() -> None:
+    from stafpipe.launch import STAGE_FUNCTIONS
+
+    for stage in STAGE_FUNCTIONS:
+        out = runner.invoke(app, [stage, "--help"]).output
+        assert "Trailing words are Hydra overrides" in out and "did-you-mean" in out, stage
+        assert "method: cezayirli, dgnn, lf, staf, straight, zhu" in out and "base" not in out, stage
+        assert "formation: circle, line" in out and "robot: diff_drive, holonomic" in out, stage
+        assert "scenario: bollards, bridge" in out and "experiment: " in out, stage
+        examples = out.split("Examples:")[1].strip().splitlines()
+        assert len(examples) == 2 and all(e.strip().startswith(f"stafpipe {stage} ") for e in examples), stage
+    for command in [*STAGES, None]:
+        out = runner.invoke(app, [command, "--help"] if command else ["--help"]).output
+        assert "<bool>" not in out, command
+    plot = runner.invoke(app, ["plot", "--help"]).output
+    for kind in ("trajectories", "partitions", "training", "connectivity", "regions", "timing", "table"):
+        assert kind in plot.split("Trailing words")[0], kind
+
+
 def test_every_stage_command_has_a_stage_function_and_a_primary_config() -> None:
     from stafpipe.launch import STAGE_FUNCTIONS, config_name, stage_function
     from stafpipe.paths import conf_dir
 
-    assert set(STAGE_FUNCTIONS) == set(STAGES) - {"run", "inspect"}
+    assert set(STAGE_FUNCTIONS) == set(STAGES) - {"run", "inspect", "export"}
     for stage in STAGE_FUNCTIONS:
         assert callable(stage_function(stage)) and (conf_dir() / f"{config_name(stage)}.yaml").is_file()
 

@@ -14,7 +14,7 @@ def _results(root):
     [
         ("datta.instances=5", "datta"),  # unknown key
         ("data.instances=many", "data.instances"),  # wrong type
-        ("formation=hexagon", "formation/hexagon"),  # unknown group option
+        ("formation=hexagon", "formation=hexagon: no such formation; choose one of: circle, line"),  # group option
         ("data.n_min=1", "data.n_min"),  # out of range
         ("formation.spacing=-1", "formation.spacing"),
     ],
@@ -22,16 +22,34 @@ def _results(root):
 def test_bad_config_is_refused(workdir, capsys, override, named) -> None:
     code = launch("generate", ["experiment=smoke", override])
     err = capsys.readouterr().err
-    assert code != 0
-    assert named in err
+    assert code == 2  # every user error exits 2 (docs/decisions.md)
+    assert named in err and "base_" not in err and "search path" not in err
     assert _results(workdir) == []
     assert not any(p.name == ".hydra" for p in workdir.rglob("*")), "a failed run left its directory behind"
 
 
 def test_bad_key_in_a_sweep_runs_no_job(workdir, capsys) -> None:
     code = launch("generate", ["-m", "seed=1,2", "data.nope=3"])
-    assert code != 0
+    assert code == 2
     assert "data.nope" in capsys.readouterr().err
+    assert _results(workdir) == []
+
+
+@pytest.mark.parametrize(
+    ("overrides", "said"),
+    [
+        (["eval.episode=3"], "eval.episode is not a setting of `stafpipe eval` (did you mean eval.episodes?)"),
+        (["evl.episodes=3"], "(did you mean eval?)"),
+        (["method=stf"], "method=stf: no such method (did you mean method=staf?); choose one of: cezayirli, dgnn, lf"),
+        (["-m", "method=straight,stf"], "method=stf: no such method"),  # a bad value anywhere in a sweep: no job runs
+        (["robot=diffdrive"], "did you mean robot=diff_drive?"),
+        (["scenario.team.n=many"], "scenario.team.n: Value 'many'"),
+    ],
+)
+def test_config_errors_are_said_in_the_users_terms(workdir, capsys, overrides, said) -> None:
+    code = launch("eval", ["eval.episodes=1", *overrides])
+    err = capsys.readouterr().err
+    assert code == 2 and said in err and "HYDRA_FULL_ERROR" not in err and "base_" not in err, err
     assert _results(workdir) == []
 
 

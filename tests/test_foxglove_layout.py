@@ -6,10 +6,12 @@ from __future__ import annotations
 import json
 import re
 
+import pytest
+
+from conftest import job_dirs
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from conftest import job_dirs
 from stafpipe.episode_log import TOPICS
 from stafpipe.launch import launch
 from stafpipe.paths import package_dir
@@ -28,6 +30,7 @@ def layout_paths(layout: dict) -> list[str]:
     return out
 
 
+@pytest.mark.slow  # one STAF episode, about 5 s
 def test_every_path_of_the_layout_reads_a_field_of_an_episode_log(workdir) -> None:
     layout = json.loads(LAYOUT.read_text())
     panels = set(re.findall(r'"([A-Za-z0-9]+![A-Za-z0-9]+)"', json.dumps(layout["layout"])))

@@ -130,8 +130,8 @@ def test_the_shipped_office_map_loads_with_its_doorways_open() -> None:
 @pytest.mark.slow  # three STAF episodes, about 15 s
 def test_staf_crosses_the_office_map(workdir) -> None:
     import pandas as pd
-
     from conftest import job_dirs
+
     from stafpipe.launch import launch
 
     assert launch("eval", ["method=staf", "scenario=office_map", "eval.episodes=2", "eval.log_episodes=false"]) == 0

@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from conftest import job_dirs, tensorboard_scalars
 from typer.testing import CliRunner
 
 import stafpipe.learning.ppo as ppo
-from conftest import job_dirs, tensorboard_scalars
 from stafpipe.cli import app
 from stafpipe.launch import launch
 from stafpipe.learning.checkpoint import load_policy

@@ -18,9 +18,9 @@ from stafpipe.formations import place
 from stafpipe.geometry import Geometry, obstacle_distance
 from stafpipe.highlevel.infer import divider
 from stafpipe.integrity import formation_integrity
+from stafpipe.learning.adapters import staf_penalties
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.features import STAF_EDGE, STAF_OWN, staf_features
-from stafpipe.learning.adapters import staf_penalties
 from stafpipe.learning.staf_net import StafPolicy
 from stafpipe.paths import conf_dir
 from stafpipe.scenario import build_scenario
@@ -274,6 +274,7 @@ def test_shipped_staf_passes_the_corridor_and_logs_split_and_regroup(workdir) ->
     """The shipped policy end to end (method=staf through eval): every robot at its goal slot without a collision,
     the team split into subteams and regrouped, and the MCAP log says so."""
     from conftest import job_dirs
+
     from stafpipe.episode_log import read_episode
     from stafpipe.launch import launch
 
@@ -289,6 +290,7 @@ def test_shipped_staf_passes_the_corridor_and_logs_split_and_regroup(workdir) ->
 
 def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir) -> None:
     from conftest import job_dirs
+
     from stafpipe.launch import launch
 
     for method in ("staf", "lf"):
@@ -311,3 +313,29 @@ def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir)
     text = (out / "table.md").read_text()
     assert "[91.5]" in text and "[30.1]" not in text and "staf-sub1" in text  # STAF line CFI; not L&F's; Table 2
     assert (out / "cfi_vs_sigma.png").is_file() and len(pd.read_csv(out / "table.csv")) == 2
+
+
+def test_separated_pushes_close_targets_apart_and_leaves_the_rest() -> None:
+    from stafpipe.controllers.staf_plan import separated
+
+    pts = np.array([[0.0, 0.0], [0.3, 0.0], [5.0, 5.0], [5.0, 5.6]])
+    out = separated(pts, 0.5)
+    assert np.allclose(out[0], [-0.1, 0.0]) and np.allclose(out[1], [0.4, 0.0])  # half each, along their line
+    assert np.allclose(out[2:], pts[2:])  # already 0.6 apart: untouched
+    crowd = np.random.default_rng(1).uniform(0, 1.0, (6, 2))
+    spread = separated(crowd, 0.5, rounds=50)
+    d = np.linalg.norm(spread[:, None] - spread[None], axis=-1) + np.eye(6)
+    assert d.min() > 0.5 - 1e-6
+
+
+def test_departure_home_gives_free_slots_to_robots_from_where_their_targets_are() -> None:
+    sc = load_named_scenario("corridor")
+    template = np.array([[0.0, -1.0], [0.0, 0.0], [0.0, 1.0]])
+    goal = template + [26.0, 6.0]
+    path = np.array([[4.0, 6.0], [26.0, 6.0]])
+    for home, want in (("regroup", [2, 1, 0]), ("departure", [0, 1, 2])):
+        plan = StafPlan(PlanConfig(home=home), sc, template, goal, path, 2.4, lambda p, g, m: np.zeros(len(p), int))
+        plan.goal = goal[[2, 1, 0]].copy()  # a stale assignment: the top robot sent to the lowest slot
+        plan.targets = goal + [-1.0, 0.0]  # the targets now lie straight before their own slots
+        plan._start_home(np.ones(3, dtype=bool), plan.targets)
+        assert np.allclose(plan.goal, goal[want]), home

@@ -12,8 +12,38 @@ app = typer.Typer(
     "Each stage takes Hydra overrides, e.g. `stafpipe generate formation=wedge seed=3`, or `-m` to sweep.",
     no_args_is_help=True,
     add_completion=False,
+    rich_markup_mode=None,  # plain help: no type tags such as <bool> in option rows, epilogs kept as written
 )
 _HYDRA_ARGS = {"allow_extra_args": True, "ignore_unknown_options": True}
+GROUPS = ("method", "scenario", "formation", "robot", "experiment")
+EXAMPLES = {
+    "generate": ["stafpipe generate formation=wedge seed=3 data.instances=5000",
+                 "stafpipe generate -m formation=circle,wedge,line seed=1,2"],
+    "generate-maps": ["stafpipe generate-maps seed=7 maps.count=20",
+                      "stafpipe generate-maps maps.count=5 'maps.drives=[diff_drive]'"],
+    "train-high": ["stafpipe train-high experiment=smoke", "stafpipe train-high seed=2 'data.mix=[wedge,line]'"],
+    "train-ppo": ["stafpipe train-ppo train_ppo.method=dgnn train_ppo.iterations=50",
+                  "stafpipe train-ppo experiment=staf_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'"],
+    "eval": ["stafpipe eval method=staf scenario=bridge formation=wedge eval.episodes=20",
+             "stafpipe eval -m hydra/launcher=local method=staf,dgnn,lf scenario=corridor"],
+    "ablate": ["stafpipe ablate ablate.study=subteam_count", "stafpipe ablate ablate.study=noise seed=2"],
+    "plot": ["stafpipe plot trajectories outputs/eval/DATE/TIME",
+             "stafpipe plot table plot.run_dirs='[outputs/eval/A,outputs/eval/B]'"],
+}
+
+
+def _epilog(stage: str) -> str:
+    """What a stage's help says after its options: overrides, config groups and their options, two examples."""
+    from stafpipe.paths import conf_dir
+
+    lines = ["\b", "Trailing words are Hydra overrides: key=value (e.g. eval.episodes=20), group=option (below),",
+             "-m to sweep comma-separated values, --cfg job to print the composed config and run nothing.",
+             "A misspelled key or option is refused with a did-you-mean (exit code 2).", "", "\b", "Config groups:"]
+    for group in GROUPS:
+        options = sorted(p.stem for p in (conf_dir() / group).glob("*.yaml") if not p.stem.startswith("base"))
+        lines.append(f"  {group}: {', '.join(options)}")
+    lines += ["", "\b", "Examples:", *(f"  {e}" for e in EXAMPLES[stage])]
+    return "\n".join(lines)
 
 
 def _stage(stage: str, overrides: list[str]) -> None:
@@ -22,47 +52,49 @@ def _stage(stage: str, overrides: list[str]) -> None:
     raise typer.Exit(launch(stage, overrides))
 
 
-@app.command(context_settings=_HYDRA_ARGS)
+@app.command("generate", context_settings=_HYDRA_ARGS, epilog=_epilog("generate"))
 def generate(ctx: typer.Context) -> None:
     """Generate the synthetic formation dataset (STAF Appendix C) as Parquet + CSV."""
     _stage("generate", ctx.args)
 
 
-@app.command("generate-maps", context_settings=_HYDRA_ARGS)
+@app.command("generate-maps", context_settings=_HYDRA_ARGS, epilog=_epilog("generate-maps"))
 def generate_maps(ctx: typer.Context) -> None:
     """Generate seeded procedural training maps (corridors, doorways, bends, gaps, bollards, fields) as scenario YAMLs."""
     _stage("generate-maps", ctx.args)
 
 
-@app.command("train-high", context_settings=_HYDRA_ARGS)
+@app.command("train-high", context_settings=_HYDRA_ARGS, epilog=_epilog("train-high"))
 def train_high(ctx: typer.Context) -> None:
     """Train STAF's high level (deep graph cut for subteaming) on a generated dataset."""
     _stage("train-high", ctx.args)
 
 
-@app.command("train-ppo", context_settings=_HYDRA_ARGS)
+@app.command("train-ppo", context_settings=_HYDRA_ARGS, epilog=_epilog("train-ppo"))
 def train_ppo(ctx: typer.Context) -> None:
     """Train a navigation policy (STAF intermediate + low level, or DGNN) with PPO."""
     _stage("train-ppo", ctx.args)
 
 
-@app.command("eval", context_settings=_HYDRA_ARGS)
+@app.command("eval", context_settings=_HYDRA_ARGS, epilog=_epilog("eval"))
 def eval_(ctx: typer.Context) -> None:
     """Evaluate a method on a scenario over seeded episodes: results table + one MCAP file per episode."""
     _stage("eval", ctx.args)
 
 
-@app.command(context_settings=_HYDRA_ARGS)
+@app.command("ablate", context_settings=_HYDRA_ARGS, epilog=_epilog("ablate"))
 def ablate(ctx: typer.Context) -> None:
-    """Run the graph-cut ablation study (STAF Fig. 7)."""
+    """Graph-cut studies: loss terms (STAF Fig. 7), subteam count (Fig. 9), noise (Fig. 14), classical partitions."""
     _stage("ablate", ctx.args)
 
 
-@app.command(context_settings=_HYDRA_ARGS)
+@app.command("plot", context_settings=_HYDRA_ARGS, epilog=_epilog("plot"))
 def plot(
     ctx: typer.Context,
     kind: str = typer.Argument(
-        None, help="What to draw: trajectories (eval run), partitions (ablate run), training (train-ppo/-high run)."),
+        None, help="What to draw: trajectories (eval run), partitions (ablate run), training (train-ppo/-high run), "
+        "connectivity (Cezayirli eval run), regions (Zhu eval run), timing (Zhu runs: Table I), table (STAF Tables 1-2 "
+        "from plot.run_dirs=[...])."),
     run_dir: str = typer.Argument(None, help="The run directory to draw from (e.g. an eval run)."),
 ) -> None:
     """Draw figures from a run directory, e.g. `stafpipe plot trajectories outputs/eval/DATE/TIME`."""
@@ -83,12 +115,17 @@ def _quote(value: str) -> str:
 def run(
     pipeline: str = typer.Argument(..., help="A name in pipelines/ (e.g. smoke) or a path to a pipeline YAML."),
     force: bool = typer.Option(False, "--force", help="Run every step, even those already done for the same config."),
+    config_dir: list[str] = typer.Option([], "--config-dir", help="Your own config directory (e.g. with scenario/"
+                                         "my_map.yaml): its groups and options join the shipped ones for every step; "
+                                         "may be given several times."),
 ) -> None:
     """Run a pipeline: its stages in order, skipping those already done for the same resolved config."""
     from stafpipe.pipeline import run_pipeline
 
     try:
-        code = run_pipeline(pipeline, force=force)
+        from pathlib import Path
+
+        code = run_pipeline(pipeline, force=force, config_dirs=[Path(d) for d in config_dir])
     except StafpipeError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import logging
+import os
 import shutil
 import sys
 import time
@@ -175,11 +176,41 @@ def _finish(cfg: DictConfig, out_dir: Path, outputs: list[Path], inputs: str, st
     log.info("%s finished: %s", cfg.stage, out_dir)
 
 
+def _config_problem(stage: str, overrides: Sequence[str]) -> str | None:
+    """What is wrong with the config of the (first) job of this command line, in the user's terms, or None: composed
+    before Hydra runs, so a bad override is reported as every user error is (exit 2), not with Hydra's exit 1."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    from stafpipe.config.compose_errors import explain, jobs_to_check
+    from stafpipe.pipeline import compose_config
+
+    try:
+        for job in jobs_to_check(overrides) or []:
+            compose_config(stage, job)
+    except (HydraException, OmegaConfBaseException) as exc:
+        return explain(exc, stage, list(overrides))
+    finally:
+        GlobalHydra.instance().clear()
+    return None
+
+
 def launch(stage: str, overrides: Sequence[str]) -> int:
     """Run `stage` with Hydra command-line `overrides` (and flags such as -m, --cfg); return the exit code."""
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    from stafpipe.config.compose_errors import explain
+
     register_configs()
-    saved_argv = sys.argv
+    if any(o in ("-m", "--multirun") for o in overrides):
+        problem = _config_problem(stage, overrides)  # every value of the sweep, before its first job runs
+        if problem:
+            print(f"error: {problem}", file=sys.stderr)
+            return 2
+    saved_argv, saved_full_error = sys.argv, os.environ.get("HYDRA_FULL_ERROR")
     sys.argv = [f"stafpipe {stage}", *overrides]
+    os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors to us instead of printing them and exiting 1
     GlobalHydra.instance().clear()
     main = hydra.main(version_base="1.3", config_path=str(conf_dir()), config_name=config_name(stage))(stage_task)
     try:
@@ -187,7 +218,17 @@ def launch(stage: str, overrides: Sequence[str]) -> int:
     except SystemExit as exc:
         code = exc.code
         return code if isinstance(code, int) else (0 if code is None else 1)
+    except (HydraException, OmegaConfBaseException) as exc:  # a config that does not compose: the user's error
+        print(f"error: {explain(exc, stage, list(overrides))}", file=sys.stderr)
+        return 2
+    except StafpipeError as exc:  # a job of a sweep (stage_task re-raises in multirun mode)
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     finally:
         sys.argv = saved_argv
+        if saved_full_error is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = saved_full_error
         GlobalHydra.instance().clear()
     return 0

@@ -19,7 +19,14 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config import register_configs
 from stafpipe.errors import StafpipeError
-from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, inputs_hash, launch
+from stafpipe.launch import (
+    MARKER,
+    STAGE_FUNCTIONS,
+    config_hash,
+    config_name,
+    inputs_hash,
+    launch,
+)
 from stafpipe.paths import conf_dir, pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
@@ -100,9 +107,22 @@ def _is_done(run_dir: Path, digest: str, inputs: str | None = None) -> bool:
     return done.get("config_hash") == digest and (inputs is None or done.get("inputs_hash") == inputs)
 
 
-def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("outputs")) -> int:
-    """Run every step in order; stop at the first failure. Returns the exit code."""
+def search_path_override(config_dirs: list[Path]) -> str:
+    """The override that adds a user's config directories to Hydra's search path (their groups and options join the
+    shipped ones; an option of the same name wins over the shipped one)."""
+    for d in config_dirs:
+        if not d.is_dir():
+            raise StafpipeError(f"--config-dir {d}: not a directory")
+    entries = ", ".join("'file://" + str(d.resolve()).replace("'", "\\'") + "'" for d in config_dirs)
+    return f"hydra.searchpath=[{entries}]"
+
+
+def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("outputs"),
+                 config_dirs: list[Path] | None = None) -> int:
+    """Run every step in order; stop at the first failure. Returns the exit code. `config_dirs`: the user's own
+    config directories, searched by every step (`stafpipe run --config-dir`)."""
     pipe = load_pipeline(find_pipeline(name_or_path))
+    extra = [search_path_override(config_dirs)] if config_dirs else []
     dirs: dict[str, Path] = {}
     plan: list[tuple[PipelineStep, list[str], Path, str, DictConfig]] = []
     for i, step in enumerate(pipe.steps):  # compose every step first: a bad config stops the pipeline before any work
@@ -115,11 +135,14 @@ def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("
                 raise StafpipeError(f"step '{_step.name}' refers to '{match.group(1)}', which is not an earlier step")
             return str(dirs[match.group(1)])
 
-        overrides = [_STEP_REF.sub(ref, o) for o in step.overrides]
+        overrides = [*extra, *(_STEP_REF.sub(ref, o) for o in step.overrides)]
         try:
             cfg = compose_config(step.stage, overrides)
-        except Exception as exc:  # noqa: BLE001 - Hydra's composition errors name the key
-            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}' has a bad config: {exc}") from exc
+        except Exception as exc:  # noqa: BLE001 - Hydra's composition errors, said in the user's terms
+            from stafpipe.config.compose_errors import explain
+
+            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}' has a bad config: "
+                                f"{explain(exc, step.stage, overrides)}") from None
         digest = config_hash(cfg)
         run_dir = (out_root / "pipelines" / pipe.name / f"{i:02d}-{step.name}-{digest[:10]}").resolve()
         dirs[step.name] = run_dir

@@ -15,7 +15,6 @@ from typing import NamedTuple
 import numpy as np
 
 
-
 @dataclass
 class SensingConfig:
     """Sensing and communication (group-free section `sensing`)."""

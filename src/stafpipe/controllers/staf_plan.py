@@ -62,6 +62,14 @@ class PlanConfig:
     3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
     high_checkpoint: str = ""
     """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
+    home: str = "regroup"
+    """When the team's goal slots are given out: once at the regroup (`regroup`, from the robots' positions then; what
+    the shipped policy was trained with) or each time robots start for home (`departure`: the slots still free go to
+    every robot not yet home-bound, from where its target is then, min-sum-of-squares as in Turpin, Michael and
+    Kumar's CAPT, IJRR 2014), so robots arriving one by one do not cross each other's way (docs/staf.md)."""
+    target_gap: float = 0.0
+    """> 0: targets of two robots closer than 2r + target_gap are pushed apart along the line joining them (a
+    split or regroup slide can bring them closer than the robots' diameter); 0: off, as trained (docs/staf.md)."""
 
     def check(self, key: str) -> None:
         from stafpipe.errors import require
@@ -72,6 +80,8 @@ class PlanConfig:
         for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
+        require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)
+        require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
 
 
 class PathFrame:
@@ -114,6 +124,26 @@ def _extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
     if len(slots) < 2:
         return 2 * radius, 2 * radius
     return float(np.ptp(slots[:, 0])) + 2 * radius, float(np.ptp(slots[:, 1])) + 2 * radius
+
+
+def separated(points: np.ndarray, distance: float, rounds: int = 3) -> np.ndarray:
+    """`points` (n, 2) with every pair closer than `distance` pushed apart along its line, half each (a few rounds
+    of pairwise projection; pairs found with a k-d tree, so large teams stay cheap)."""
+    from scipy.spatial import cKDTree
+
+    out = np.array(points, dtype=float)
+    for _ in range(rounds):
+        pairs = cKDTree(out).query_pairs(distance - 1e-9, output_type="ndarray")
+        if len(pairs) == 0:
+            break
+        i, j = pairs[:, 0], pairs[:, 1]
+        d = out[i] - out[j]
+        length = np.linalg.norm(d, axis=1, keepdims=True)
+        unit = np.where(length > 1e-9, d / np.maximum(length, 1e-9), [[1.0, 0.0]])
+        push = 0.5 * (distance - length) * unit
+        np.add.at(out, i, push)
+        np.add.at(out, j, -push)
+    return out
 
 
 def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
@@ -217,6 +247,12 @@ class StafPlan:
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
         """Targets (n, 2) for robots at `pos` (n, 2) after one control step of `dt` seconds."""
+        targets = self._step(pos, dt)
+        if self.cfg.target_gap > 0:
+            return separated(targets, 2 * self.radius + self.cfg.target_gap)
+        return targets
+
+    def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
         if self.regrouped:
             return self._home(dt)
         progress = self.frame.progress(pos)
@@ -324,6 +360,9 @@ class StafPlan:
         new = robots & ~self.homing
         if not new.any():
             return
+        if self.cfg.home == "departure":  # the free slots go to every robot not yet home-bound, from its target
+            waiting = np.flatnonzero(~self.homing)
+            self.goal[waiting] = self.goal[waiting][assign_slots(self.targets[waiting], self.goal[waiting])]
         self.home_from[new] = self.targets[new]  # from where each target is now: no target jumps
         self.home_frac[new] = 0.0
         self.home_rate[new] = self._top_speed_rate(self.targets[new], self.goal[new])

@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from stafpipe import __version__
 from stafpipe.errors import StafpipeError
@@ -25,6 +24,7 @@ from stafpipe.highlevel.config import HighLevelConfig, LossWeights, TrainHighCon
 from stafpipe.highlevel.graphs import TeamGraph, collate
 from stafpipe.highlevel.loss import TERMS, loss_terms, total_loss
 from stafpipe.highlevel.model import DeepGraphCut
+from stafpipe.progress import progress
 from stafpipe.torch_io import save_payload
 from stafpipe.training_record import commit
 
@@ -77,8 +77,8 @@ def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, s
         else:
             log.warning("%s was made by another config; starting afresh", state_path)
     steps = math.ceil(len(train_set) / tc.batch_size)
-    for epoch in tqdm(range(start_epoch, tc.epochs), desc="train-high", unit="epoch", initial=start_epoch,
-                      total=tc.epochs, disable=None):
+    for epoch in progress(range(start_epoch, tc.epochs), desc="train-high", unit="epoch", initial=start_epoch,
+                          total=tc.epochs):
         rng = np.random.default_rng([seed, 2, epoch])  # the epoch's order and m draws depend on (seed, epoch) only
         order = rng.permutation(len(train_set))
         ms = _draw_m(rng, train_set, tc.m_choices)

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.errors import StafpipeError
@@ -25,6 +24,7 @@ from stafpipe.learning.adapters import ADAPTERS, Adapter
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.learning.rollout import Rollout, collect, commands, gae
 from stafpipe.learning.teachers import teacher_actions
+from stafpipe.progress import progress
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.torch_io import save_payload
@@ -127,7 +127,7 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
     gen = torch.Generator().manual_seed(seed)
     sets: list[tuple[torch.Tensor, ...]] = []  # one per batch of episodes: its worlds share the team size
     loss = torch.zeros(())
-    for round_ in range(1 + im.dagger):
+    for round_ in progress(range(1 + im.dagger), desc="train-ppo: imitation", unit="round"):
         driver = policy if round_ > 0 or tc.init_from else None  # a loaded network drives from the first round
         sets += [_teacher_samples(driver, adapter, draw(rng, tc.worlds), world_cfg, sensing, tc, rng)
                  for _ in range(im.rollouts)]
@@ -176,7 +176,7 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         history, start = state["history"], int(state["iteration"])
         warm = state.get("warm", {})
         log.info("resumed from iteration %d of %s", start, resume_from)
-    bar = tqdm(range(start, tc.iterations), desc="train-ppo", unit="it", initial=start, total=tc.iterations, disable=None)
+    bar = progress(range(start, tc.iterations), desc="train-ppo", unit="iteration", initial=start, total=tc.iterations)
     for it in bar:
         began = time.perf_counter()
         rng = np.random.default_rng([seed, it])

@@ -15,13 +15,13 @@ import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 from scipy import stats
-from tqdm import tqdm
 
 from stafpipe.config.schema import EvalConfig, FormationConfig, RobotConfig
 from stafpipe.controllers import make_controller
 from stafpipe.episode import run_episode
 from stafpipe.geometry import Geometry
 from stafpipe.io import write_table
+from stafpipe.progress import progress
 from stafpipe.scenario import Scenario, build_scenario, resolve_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
@@ -81,7 +81,7 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     method_cfg = OmegaConf.to_object(cfg.method)
     geometry = Geometry(scenario)
     rows, outputs = [], []
-    for k in tqdm(range(ev.episodes), desc=f"eval {method_cfg.name} on {scenario.name}", unit="episode", disable=None):
+    for k in progress(range(ev.episodes), desc=f"eval {method_cfg.name} on {scenario.name}", unit="episode"):
         seed = episode_seed(int(cfg.seed), k)
         log_path = out_dir / "episodes" / f"episode_{k:04d}.mcap" if ev.log_episodes else None
         controller = make_controller(method_cfg)

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.formations import formation_slots, place
 from stafpipe.io import write_table
+from stafpipe.progress import progress
 
 log = logging.getLogger(__name__)
 SCHEMA_VERSION = "1"
@@ -48,7 +48,7 @@ def generate_instances(data: DataConfig, formation: FormationConfig, seed: int) 
     kinds = list(data.mix) or [formation.type]
     cache: dict[tuple[str, int], np.ndarray] = {}
     blocks: list[dict[str, np.ndarray]] = []
-    for inst in tqdm(range(data.instances), desc="generate", unit="team", disable=None, mininterval=0.5):
+    for inst in progress(range(data.instances), desc="generate", unit="team"):
         kind = kinds[int(rng.integers(len(kinds)))]
         n = int(rng.integers(data.n_min, data.n_max + 1))
         if (kind, n) not in cache:

@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
-from tqdm import tqdm
 
 from stafpipe.errors import StafpipeError
 from stafpipe.io import save_figure, write_table
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.paths import conf_dir
+from stafpipe.progress import progress
 from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
 
 log = logging.getLogger(__name__)
@@ -98,7 +98,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     if test_maps:
         log.warning("train_ppo.scenarios include the built-in test maps %s: results on them are not held out",
                     test_maps)
-    drawn = [(s, *path_and_width(s)) for s in tqdm(pool, desc="train-ppo: maps", unit="map", disable=None)]
+    drawn = [(s, *path_and_width(s)) for s in progress(pool, desc="train-ppo: maps", unit="map")]
     # a batch of worlds shares the team size and the robot: one such group per iteration
     groups: dict[str, list] = {}
     for d in drawn:
