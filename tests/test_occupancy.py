@@ -100,7 +100,7 @@ def test_an_unreadable_image_and_a_missing_map_are_refused(tmp_path) -> None:
     with pytest.raises(MapError, match="cannot be read"):
         load_map(path)
     with pytest.raises(ScenarioError, match="occupancy.map: map file .*nowhere.yaml does not exist"):
-        (tmp_path / "sc.yaml").write_text("occupancy: {map: nowhere.yaml}\n")
+        (tmp_path / "sc.yaml").write_text("occupancy: {map: nowhere.yaml}\nteam: {start: [1, 1], goal: [2, 2]}\n")
         load_scenario_file(tmp_path / "sc.yaml")
 
 

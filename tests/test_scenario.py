@@ -68,18 +68,46 @@ BAD = {
 }
 
 
+def complete(text: str) -> str:
+    """`text` laid over a minimal valid scenario (a world and a team's start and goal), so each case tests its field."""
+    import yaml
+
+    try:
+        extra = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    base = {"world": {"xmin": 0, "ymin": 0, "xmax": 30, "ymax": 12}, "team": {"start": [4.0, 6.0], "goal": [26.0, 6.0]}}
+    for key, value in extra.items():
+        base[key] = {**base[key], **value} if isinstance(value, dict) and isinstance(base.get(key), dict) else value
+    return yaml.safe_dump(base)
+
+
 @pytest.mark.parametrize("text", list(BAD))
 def test_malformed_scenario_names_the_field(tmp_path, text) -> None:
     path = tmp_path / "bad.yaml"
-    path.write_text(text)
+    path.write_text(complete(text))
     with pytest.raises(ScenarioError) as err:
         build_scenario(load_scenario_file(path))
     assert BAD[text] in str(err.value)
 
 
+@pytest.mark.parametrize(("text", "said"), [
+    ("", "is empty or not a mapping"),
+    ("- 1\n- 2\n", "is empty or not a mapping"),
+    ("name: x\nteam: {start: [1, 1], goal: [5, 5]}\n", "misses `world`"),
+    ("name: x\nworld: {xmin: 0, ymin: 0, xmax: 10, ymax: 10}\n", "misses `team.start`"),
+    ("world: {xmin: 0, ymin: 0, xmax: 10, ymax: 10}\nteam: {n: 4, start: [1, 1]}\n", "misses `team.goal`"),
+])
+def test_a_scenario_file_takes_nothing_from_the_default_corridor(tmp_path, text, said) -> None:
+    path = tmp_path / "part.yaml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match=said.replace("`", ".")):
+        load_scenario_file(path)
+
+
 def test_malformed_scenario_through_the_cli_exits_2_and_leaves_nothing(workdir, capsys) -> None:
     bad = workdir / "bad.yaml"
-    bad.write_text("robot: {drive: hovercraft}\n")
+    bad.write_text(complete("robot: {drive: hovercraft}\n"))
     assert launch("eval", [f"scenario.path={bad}"]) == 2
     assert "robot.drive" in capsys.readouterr().err
     assert not list(workdir.rglob("results.parquet")) and not list(workdir.rglob("*.mcap"))

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from omegaconf import OmegaConf
+from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
 from stafpipe.errors import StafpipeError
@@ -270,6 +270,23 @@ def anchor_map(spec: ScenarioConfig, base: Path) -> None:
         spec.occupancy.map = str(base / spec.occupancy.map)
 
 
+def _required_sections(raw: Any, path: Path) -> None:
+    """A scenario file says where its team starts and ends and how big its world is: nothing of it is taken from the
+    default corridor (an empty file or one without `team:` once ran as an obstacle-free corridor, exit 0)."""
+    if not isinstance(raw, DictConfig) or len(raw) == 0:
+        raise ScenarioError(f"scenario file {path} is empty or not a mapping: it needs at least `world` (or "
+                            "`occupancy.map`) and `team` with `start` and `goal` (docs/scenarios.md)")
+    occupancy = raw.get("occupancy")
+    if "world" not in raw and not (isinstance(occupancy, DictConfig) and occupancy.get("map")):
+        raise ScenarioError(f"scenario file {path} misses `world` (xmin, ymin, xmax, ymax) and has no `occupancy.map` "
+                            "to take it from")
+    team = raw.get("team")
+    missing = [k for k in ("start", "goal") if not isinstance(team, DictConfig) or k not in team]
+    if missing:
+        raise ScenarioError(f"scenario file {path} misses `team.{missing[0]}`: a scenario names where its team starts "
+                            "and where it goes (team.start, team.goal)")
+
+
 def load_scenario_file(path: str | Path) -> ScenarioConfig:
     """Read a scenario YAML file into a typed ScenarioConfig; errors name the file and the field."""
     path = Path(path)
@@ -277,12 +294,14 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
         raise ScenarioError(f"scenario file {path} does not exist")
     try:
         raw = OmegaConf.load(path)
+    except Exception as exc:  # noqa: BLE001 - a YAML syntax error
+        raise ScenarioError(f"scenario file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    _required_sections(raw, path)
+    try:
         merged = OmegaConf.merge(OmegaConf.structured(ScenarioConfig), raw)
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None)
         raise ScenarioError(f"scenario file {path}: bad field {key!r}: {str(exc).splitlines()[0]}") from None
-    except Exception as exc:  # noqa: BLE001 - a YAML syntax error
-        raise ScenarioError(f"scenario file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
     spec: ScenarioConfig = OmegaConf.to_object(merged)  # type: ignore[assignment]
     spec.path = None
     anchor_map(spec, path.parent)
