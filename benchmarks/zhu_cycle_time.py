@@ -20,13 +20,7 @@ from stafpipe.geometry import Geometry
 from stafpipe.io import markdown_table
 from stafpipe.paths import conf_dir
 from stafpipe.plots.zhu import timing_table
-from stafpipe.scenario import (
-    ScenarioConfig,
-    TeamSpec,
-    WorldBounds,
-    build_scenario,
-    load_scenario_file,
-)
+from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario, load_scenario_file
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import job_dirs
 from typer.testing import CliRunner
 
+from conftest import job_dirs
 from stafpipe.cli import app
 from stafpipe.highlevel.graphs import radius_edges
 from stafpipe.highlevel.partition import balanced_kmeans, spectral_partition

@@ -8,12 +8,7 @@ import numpy as np
 import pytest
 
 from stafpipe.controllers.base import TeamInfo
-from stafpipe.controllers.cezayirli import (
-    CezayirliConfig,
-    CezayirliController,
-    Switch,
-    cost_gradient,
-)
+from stafpipe.controllers.cezayirli import CezayirliConfig, CezayirliController, Switch, cost_gradient
 from stafpipe.errors import ConfigError
 from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
 from stafpipe.sensing import SensingConfig
@@ -98,10 +93,10 @@ def test_v_lines_up_only_behind_robots_ahead_along_its_course() -> None:
 def test_simulation_2_forms_a_v_behind_the_leader(workdir) -> None:
     """Simulation 2 (Fig. 5): 100 s in, five robots on each side of the leader's course, each arm a chain of about
     d_1 spacing slanting back from the leader (the leader is robot 0, the front of the start circle)."""
-    from conftest import job_dirs
-
     from stafpipe.episode_log import read_episode
     from stafpipe.launch import launch
+
+    from conftest import job_dirs
 
     assert launch("eval", ["experiment=cezayirli_sim2", "scenario.time_limit=100", "eval.episodes=1"]) == 0
     [run] = job_dirs(workdir / "outputs" / "eval")

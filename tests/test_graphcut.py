@@ -13,14 +13,7 @@ from stafpipe.highlevel.config import HighLevelConfig
 from stafpipe.highlevel.graphs import Team, make_batch, radius_edges
 from stafpipe.highlevel.loss import balance_printed, loss_terms
 from stafpipe.highlevel.model import DeepGraphCut
-from stafpipe.highlevel.partition import (
-    balance_sizes,
-    balanced_kmeans,
-    choose_m,
-    formation_width,
-    partition_stats,
-    repair,
-)
+from stafpipe.highlevel.partition import balance_sizes, balanced_kmeans, choose_m, formation_width, partition_stats, repair
 
 CFG = HighLevelConfig()
 

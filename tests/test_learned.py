@@ -9,11 +9,11 @@ import re
 import numpy as np
 import pytest
 import torch
-from conftest import job_dirs
 
 import stafpipe.learning.ppo as ppo
 import stafpipe.learning.rollout as rollout
 import stafpipe.stages.train_ppo as train_stage
+from conftest import job_dirs
 from stafpipe.controllers import make_controller
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.controllers.staf import StafMethodConfig

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from conftest import job_dirs
 
+from conftest import job_dirs
 from stafpipe.launch import launch
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import job_dirs
 
+from conftest import job_dirs
 from stafpipe.formations import place
 from stafpipe.geometry import Geometry, obstacle_distance
 from stafpipe.launch import launch

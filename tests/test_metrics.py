@@ -4,13 +4,7 @@ import numpy as np
 import pytest
 
 from stafpipe.formations import formation_slots, place
-from stafpipe.integrity import (
-    circle_integrity,
-    formation_integrity,
-    line_integrity,
-    v_integrity,
-    wedge_shape_integrity,
-)
+from stafpipe.integrity import circle_integrity, formation_integrity, line_integrity, v_integrity, wedge_shape_integrity
 from stafpipe.metrics import (
     MetricContext,
     Trajectory,

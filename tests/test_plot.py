@@ -6,7 +6,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import job_dirs
 from matplotlib.collections import LineCollection
 from matplotlib.colors import to_rgba
 from matplotlib.patches import Polygon
@@ -17,6 +16,8 @@ from stafpipe.episode import scenario_from_yaml
 from stafpipe.episode_log import read_episode
 from stafpipe.launch import launch
 from stafpipe.plots.trajectories import trajectory_figure
+
+from conftest import job_dirs
 
 
 def _eval_run(workdir):

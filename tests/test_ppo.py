@@ -144,3 +144,21 @@ def test_init_from_starts_at_the_loaded_weights_and_refuses_other_settings(tmp_p
     with pytest.raises(StafpipeError, match="train_ppo.init_from.*hidden"):
         ppo.train_ppo(TrainPPOConfig(init_from=str(saved), policy=PolicyConfig(hidden=8)), lambda rng, k: [], WorldConfig(),
                       SensingConfig(), 0.3, 4, tmp_path / "d", "h", None, lambda h: None)
+
+
+def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) -> None:
+    from stafpipe.learning.ppo import _teacher_samples
+    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.config import RewardConfig
+
+    tc = TrainPPOConfig(worlds=1, episode_steps=40, policy=PolicyConfig(hidden=16),
+                        imitation=ImitationConfig(epochs=1, teacher="avoiding", near_weight=5.0, noise=0.0))
+    corridor = load_named_scenario("corridor")
+    adapter = ADAPTERS["dgnn"](tc.policy, RewardConfig(), None, 2.0)
+    drawn = [(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)]
+    *_, weight = _teacher_samples(None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0))
+    # a circle of 10 at 1 m spacing: some robots brake for a neighbour within 0.35 m, most do not
+    assert set(weight.unique().tolist()) == {1.0, 5.0}
+    tc.imitation.near_weight = 1.0
+    *_, plain = _teacher_samples(None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0))
+    assert (plain == 1.0).all()

@@ -1,9 +1,9 @@
 """Sweeps go through Hydra's launcher plugins: each job its own directory with its own config."""
 
 import pytest
-from conftest import job_dirs
 from omegaconf import OmegaConf
 
+from conftest import job_dirs
 from stafpipe.launch import launch
 
 SMALL = ["experiment=smoke", "data.instances=10"]

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 import torch
-from conftest import job_dirs, tensorboard_scalars
 
 import stafpipe.highlevel.training as training
+from conftest import job_dirs, tensorboard_scalars
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.highlevel.checkpoint import load_checkpoint
 from stafpipe.highlevel.config import HighLevelConfig, TrainHighConfig

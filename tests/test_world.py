@@ -2,12 +2,7 @@ import numpy as np
 import pytest
 
 from stafpipe.paths import conf_dir
-from stafpipe.scenario import (
-    ScenarioConfig,
-    TeamSpec,
-    build_scenario,
-    load_scenario_file,
-)
+from stafpipe.scenario import ScenarioConfig, TeamSpec, build_scenario, load_scenario_file
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import Worlds
 

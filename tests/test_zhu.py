@@ -11,23 +11,10 @@ import numpy as np
 import pytest
 
 from stafpipe.controllers.zhu import ZhuConfig, ZhuController, ZhuFault
-from stafpipe.controllers.zhu_decisions import (
-    StuckDetector,
-    comm_components,
-    intersection_graph,
-    merge_candidate,
-    merge_requests,
-    mutual_merges,
-    needs_split,
-    spectral_partition,
-    split_team,
-)
-from stafpipe.convex_region import (
-    fit_centres,
-    grow_halfplanes,
-    intersect_all,
-    regions_from_halfplanes,
-)
+from stafpipe.controllers.zhu_decisions import (StuckDetector, comm_components, intersection_graph, merge_candidate,
+                                                merge_requests, mutual_merges, needs_split, spectral_partition,
+                                                split_team)
+from stafpipe.convex_region import fit_centres, grow_halfplanes, intersect_all, regions_from_halfplanes
 from stafpipe.episode import run_episode
 from stafpipe.errors import ConfigError
 from stafpipe.geometry import Geometry

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from conftest import job_dirs
 from typer.testing import CliRunner
 
 from stafpipe.cli import app
 from stafpipe.launch import launch
 from stafpipe.plots.zhu import TIMED_PARTS, timing_table
+
+from conftest import job_dirs
 
 
 def _zhu_run(workdir):  # noqa: ANN001, ANN202

@@ -14,13 +14,8 @@ from omegaconf import OmegaConf
 
 from stafpipe.controllers import Controller, TeamInfo
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
-from stafpipe.geometry import Geometry, capsule_arrays, closest_points, path_length
-from stafpipe.metrics import (
-    MetricContext,
-    Trajectory,
-    episode_metrics,
-    matched_goal_distance,
-)
+from stafpipe.geometry import Geometry, closest_points, capsule_arrays, path_length
+from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds

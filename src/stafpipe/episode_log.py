@@ -16,8 +16,8 @@ from typing import Any, BinaryIO
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
 from mcap.writer import Writer as RawWriter
+from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer
 

@@ -21,13 +21,7 @@ import numpy as np
 
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES, formation_slots
-from stafpipe.scenario import (
-    RobotSpec,
-    ScenarioConfig,
-    TeamSpec,
-    WorldBounds,
-    build_scenario,
-)
+from stafpipe.scenario import RobotSpec, ScenarioConfig, TeamSpec, WorldBounds, build_scenario
 
 FAMILIES = ("corridor", "bridge", "doorway", "bend", "s_bend", "gaps", "bollards", "field")
 DRIVE_KINDS = ("holonomic", "diff_drive")

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 
+
 @dataclass
 class SensingConfig:
     """Sensing and communication (group-free section `sensing`)."""

@@ -27,25 +27,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
-from stafpipe.controllers.zhu_decisions import (
-    StuckDetector,
-    comm_components,
-    intersection_graph,
-    merge_candidate,
-    merge_requests,
-    mutual_merges,
-    needs_split,
-    split_team,
-)
-from stafpipe.convex_region import (
-    Region,
-    fit_centres,
-    footprint_area,
-    grow_halfplanes,
-    hull_vertices,
-    intersect_all,
-    regions_from_halfplanes,
-)
+from stafpipe.controllers.zhu_decisions import (StuckDetector, comm_components, intersection_graph, merge_candidate,
+                                                merge_requests, mutual_merges, needs_split, split_team)
+from stafpipe.convex_region import (Region, fit_centres, footprint_area, grow_halfplanes, hull_vertices, intersect_all,
+                                    regions_from_halfplanes)
 from stafpipe.errors import require
 from stafpipe.formations import assign_slots, formation_slots, rotation
 from stafpipe.geometry import capsule_arrays

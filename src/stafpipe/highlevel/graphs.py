@@ -17,7 +17,6 @@ from scipy.spatial import cKDTree
 
 from stafpipe.highlevel.config import NODE_FEATURES
 
-
 @dataclass
 class Team:
     """One team: start positions (n, 2), goals (n, 2), velocities (n, 2) and the number of subteams wanted."""

@@ -12,6 +12,7 @@ from stafpipe.highlevel.graphs import Team, TeamGraph, collate, team_graph
 from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut
 from stafpipe.highlevel.partition import choose_m, hard_assignment
 
+
 SMALL_TEAM = 64
 """A single team up to this size is decided by the numpy forward pass (same output, a fraction of the time)."""
 

@@ -97,12 +97,14 @@ def _teacher_samples(policy: torch.nn.Module | None, adapter: Adapter, drawn: li
         f = adapter.step(obs, world_cfg.control_dt).features
         to_aim = adapter.teacher_aim() - obs.position
         act = teacher_actions(im.teacher, to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
-        free = teacher_actions("proportional", to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
         for store, x in ((own, f.own), (edge, f.edge), (mask, f.mask)):
             store.append(torch.from_numpy(x))
         target.append(torch.from_numpy(act.astype(np.float32)))
-        # where the teacher brakes for a neighbour or a wall (its action is not the free step) the sample weighs more
-        weight.append(torch.from_numpy(np.where(np.abs(act - free).sum(-1) > 1e-6, im.near_weight, 1.0)).float())
+        braking = np.zeros(act.shape[:-1], dtype=bool)
+        if im.near_weight != 1:  # where the teacher brakes for a neighbour or a wall the sample weighs more
+            free = teacher_actions("proportional", to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
+            braking = np.abs(act - free).sum(-1) > 1e-6
+        weight.append(torch.from_numpy(np.where(braking, im.near_weight, 1.0)).float())
         drive = act
         if policy is not None:
             with torch.no_grad():
