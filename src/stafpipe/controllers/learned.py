@@ -22,6 +22,11 @@ from stafpipe.sensing import Observation
 log = logging.getLogger(__name__)
 
 
+PLAN_SAFEGUARDS = ("home", "target_gap")
+"""Plan settings that only keep targets from crossing or crowding (docs/staf.md): a policy trained without them runs
+with them, so they are not compared with its training record."""
+
+
 def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:  # noqa: ANN401
     """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the plan
     (`method.plan.*` against `train_ppo.plan.*`) and the sensing radius (against `sensing.radius`), as far as the
@@ -31,7 +36,7 @@ def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[An
     plan, recorded = getattr(cfg, "plan", None), trained.get("plan")
     if plan is not None and isinstance(recorded, dict):
         for key, value in dataclasses.asdict(plan).items():
-            if key in recorded and recorded[key] != value:
+            if key in recorded and recorded[key] != value and key not in PLAN_SAFEGUARDS:
                 differ[f"method.plan.{key}"] = (value, recorded[key])
     radius = made_by.get("sensing", {}).get("radius")
     if radius is not None and float(radius) != float(cfg.sensing_radius):

@@ -62,14 +62,15 @@ class PlanConfig:
     3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
     high_checkpoint: str = ""
     """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
-    home: str = "regroup"
-    """When the team's goal slots are given out: once at the regroup (`regroup`, from the robots' positions then; what
-    the shipped policy was trained with) or each time robots start for home (`departure`: the slots still free go to
-    every robot not yet home-bound, from where its target is then, min-sum-of-squares as in Turpin, Michael and
-    Kumar's CAPT, IJRR 2014), so robots arriving one by one do not cross each other's way (docs/staf.md)."""
-    target_gap: float = 0.0
+    home: str = "departure"
+    """When the team's goal slots are given out: each time robots start for home (`departure`: the slots still free
+    go to every robot not yet home-bound, from where its target is then, min-sum-of-squares as in Turpin, Michael and
+    Kumar's CAPT, IJRR 2014), so robots arriving one by one do not cross each other's way; or once at the regroup
+    (`regroup`, from the robots' positions then; what the shipped policy was trained with). docs/staf.md."""
+    target_gap: float = 0.1
     """> 0: targets of two robots closer than 2r + target_gap are pushed apart along the line joining them (a
-    split or regroup slide can bring them closer than the robots' diameter); 0: off, as trained (docs/staf.md)."""
+    split or regroup slide can bring them closer than the robots' diameter); 0: off (the shipped policy was trained
+    with 0). docs/staf.md."""
 
     def check(self, key: str) -> None:
         from stafpipe.errors import require
