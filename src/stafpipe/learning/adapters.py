@@ -84,9 +84,15 @@ class DGNNAdapter(Adapter):
     def step(self, obs: Observation, dt: float) -> Step:
         pc = self.policy
         goal = obs.goal
-        if pc.guide == "path":
-            target = np.stack([guide_targets(obs.position[w], goal[w], t.path, pc.lookahead, pc.release)
-                               for w, t in enumerate(self.teams)])
+        if pc.guide == "path":  # worlds that share a path are guided in one call (each robot independently)
+            target = np.empty_like(goal)
+            groups: dict[int, list[int]] = {}
+            for w, t in enumerate(self.teams):
+                groups.setdefault(id(t.path), []).append(w)
+            for ws in groups.values():
+                pos, own_goal = obs.position[ws].reshape(-1, 2), goal[ws].reshape(-1, 2)
+                guided = guide_targets(pos, own_goal, self.teams[ws[0]].path, pc.lookahead, pc.release)
+                target[ws] = guided.reshape(len(ws), -1, 2)
         else:
             target = goal
         self._aim = target  # a teacher steers where the network is guided

@@ -44,6 +44,32 @@ def contact_penalties(worlds: Worlds, obs: Observation, rc: RewardConfig) -> np.
     return rc.robot_collision * robot_hits + rc.wall_contact * wall
 
 
+def step_reward(adapter: Adapter, worlds: Worlds, obs: Observation, aim: np.ndarray, before: np.ndarray,
+                reached: np.ndarray, tolerance: float, rc: RewardConfig) -> tuple[np.ndarray, ...]:
+    """(B, n) reward of the step just taken, each robot's distance to its goal slot and whether it has reached it:
+    progress towards the adapter's aim (from `before`), the one-off arrival bonus, contacts and the method's own
+    terms. The trainer and the multi-agent environment (marl_env.py) both reward through this."""
+    new_dist = np.linalg.norm(adapter.goals() - worlds.pos, axis=-1)
+    now_reached = new_dist <= tolerance
+    progress = before - np.linalg.norm(aim - worlds.pos, axis=-1)
+    reward = rc.progress * progress + rc.goal * (now_reached & ~reached) + contact_penalties(worlds, obs, rc)
+    reward = reward + adapter.reward(worlds.pos, worlds.vel, obs)
+    return reward, new_dist, reached | now_reached
+
+
+def episode_stats(worlds: Worlds, dist: np.ndarray, reached: np.ndarray, tolerance: float, hits: int,
+                  returns: "np.ndarray | torch.Tensor") -> dict[str, float]:
+    """The trainer's end-of-episode metrics of B worlds; `returns` (B, n) the robots' summed rewards."""
+    at_goal = dist <= tolerance
+    return {
+        "success_rate": float((at_goal & ~worlds.collided).mean()),  # the harness' SR: at goal, never collided
+        "at_goal": float(at_goal.mean()),
+        "reached_once": float(reached.mean()),
+        "collisions_per_episode": hits / worlds.size,
+        "episode_return": float(returns.mean()),
+    }
+
+
 def collect(policy: torch.nn.Module, adapter: Adapter, worlds: Worlds, obs: Observation, tc: TrainPPOConfig,
             tolerance: float, deterministic: bool = False) -> tuple[Rollout, dict[str, float]]:
     """Run `tc.episode_steps` steps in every world with actions sampled from the policy (its mean if `deterministic`,
@@ -66,12 +92,7 @@ def collect(policy: torch.nn.Module, adapter: Adapter, worlds: Worlds, obs: Obse
             logprob = dist_a.log_prob(action).sum(-1)
         obs, events = worlds.step(commands(action.numpy(), worlds.heading, worlds.robot.max_speed))
         hits += sum(len(e) for e in events)
-        new_dist = np.linalg.norm(adapter.goals() - worlds.pos, axis=-1)
-        now_reached = new_dist <= tolerance
-        progress = before - np.linalg.norm(aim - worlds.pos, axis=-1)
-        reward = rc.progress * progress + rc.goal * (now_reached & ~reached) + contact_penalties(worlds, obs, rc)
-        reward = reward + adapter.reward(worlds.pos, worlds.vel, obs)
-        dist, reached = new_dist, reached | now_reached
+        reward, dist, reached = step_reward(adapter, worlds, obs, aim, before, reached, tolerance, rc)
         for key, v in (("own", own), ("edge", edge), ("mask", mask), ("actions", action), ("logprobs", logprob),
                        ("values", value), ("rewards", torch.from_numpy(reward.astype(np.float32)))):
             buf[key].append(v)
@@ -79,15 +100,7 @@ def collect(policy: torch.nn.Module, adapter: Adapter, worlds: Worlds, obs: Obse
     with torch.no_grad():
         _, last_value = policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
     rollout = Rollout(**{k: torch.stack(v) for k, v in buf.items()}, last_value=last_value)
-    at_goal = dist <= tolerance
-    stats = {
-        "success_rate": float((at_goal & ~worlds.collided).mean()),  # the harness' SR: at goal, never collided
-        "at_goal": float(at_goal.mean()),
-        "reached_once": float(reached.mean()),
-        "collisions_per_episode": hits / worlds.size,
-        "episode_return": float(rollout.rewards.sum(0).mean()),
-    }
-    return rollout, stats
+    return rollout, episode_stats(worlds, dist, reached, tolerance, hits, rollout.rewards.sum(0))
 
 
 def gae(rewards: torch.Tensor, values: torch.Tensor, last_value: torch.Tensor, gamma: float,
