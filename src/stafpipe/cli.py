@@ -32,8 +32,9 @@ EXAMPLES = {
 }
 
 
-def _epilog(stage: str) -> str:
-    """What a stage's help says after its options: overrides, config groups and their options, two examples."""
+def _overrides_help() -> str:
+    """The part of every stage's help that is the same for all: overrides, config groups and their options (the
+    group directories are listed once per process, not once per stage)."""
     from stafpipe.paths import conf_dir
 
     lines = ["\b", "Trailing words are Hydra overrides: key=value (e.g. eval.episodes=20), group=option (below),",
@@ -42,8 +43,15 @@ def _epilog(stage: str) -> str:
     for group in GROUPS:
         options = sorted(p.stem for p in (conf_dir() / group).glob("*.yaml") if not p.stem.startswith("base"))
         lines.append(f"  {group}: {', '.join(options)}")
-    lines += ["", "\b", "Examples:", *(f"  {e}" for e in EXAMPLES[stage])]
     return "\n".join(lines)
+
+
+_OVERRIDES_HELP = _overrides_help()
+
+
+def _epilog(stage: str) -> str:
+    """What a stage's help says after its options: overrides, config groups and their options, two examples."""
+    return "\n".join([_OVERRIDES_HELP, "", "\b", "Examples:", *(f"  {e}" for e in EXAMPLES[stage])])
 
 
 def _stage(stage: str, overrides: list[str]) -> None:

@@ -177,8 +177,8 @@ def _finish(cfg: DictConfig, out_dir: Path, outputs: list[Path], inputs: str, st
 
 
 def _config_problem(stage: str, overrides: Sequence[str]) -> str | None:
-    """What is wrong with the config of the (first) job of this command line, in the user's terms, or None: composed
-    before Hydra runs, so a bad override is reported as every user error is (exit 2), not with Hydra's exit 1."""
+    """What is wrong with the configs of a sweep, in the user's terms, or None: every value of every swept key is
+    composed before the first job runs, so a bad value late in a sweep does not stop it half done."""
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 

@@ -14,8 +14,9 @@ polygon decomposition.
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +41,7 @@ class OccupancyGrid:
     origin: tuple[float, float, float]
     """x, y of the lower-left corner of cell (0, 0) and the map's yaw (rad)."""
     source: str
+    _segments: dict[float, list] = field(default_factory=dict, repr=False, compare=False)
 
     def extent(self) -> tuple[float, float, float, float]:
         """(xmin, ymin, xmax, ymax) of the map's cells in the world."""
@@ -67,6 +69,11 @@ class OccupancyGrid:
 
     def wall_segments(self, simplify: float) -> list[tuple[tuple[float, float], tuple[float, float]]]:
         """Every edge of the simplified outline of the occupied region (outer rings and holes), in world metres."""
+        if simplify not in self._segments:
+            self._segments[simplify] = self._outline(simplify)
+        return self._segments[simplify]
+
+    def _outline(self, simplify: float) -> list[tuple[tuple[float, float], tuple[float, float]]]:
         import shapely
 
         rows, starts, ends = _runs(self.occupied)
@@ -112,7 +119,6 @@ def _number(value: Any, where: str, low: float, high: float = math.inf, low_open
 def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
     """Read a `map_server` map YAML and its image; every error names the file and the field."""
     import yaml
-    from PIL import Image, UnidentifiedImageError
 
     path = Path(path)
     if not path.is_file():
@@ -147,13 +153,27 @@ def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
         raise MapError(f"{where}: mode must be trinary or scale (raw maps are not supported), got {mode!r}")
     if unknown not in ("occupied", "free"):
         raise MapError(f"occupancy.unknown must be occupied or free, got {unknown!r}")
+    stat = image_path.stat()
+    return _grid(str(image_path), (stat.st_mtime_ns, stat.st_size), bool(negate), occupied_thresh, free_thresh, unknown,
+                 resolution, (ox, oy, yaw[0] if yaw else 0.0), str(path))
+
+
+@functools.lru_cache(maxsize=16)
+def _grid(image_path: str, version: tuple[int, int], negate: bool, occupied_thresh: float, free_thresh: float, unknown: str,
+          resolution: float, origin: tuple[float, float, float], source: str) -> OccupancyGrid:
+    """The cells of an image, read once per version of the file: a scenario is built several times per run (with
+    each formation, each eval), and the image and its outline need not be read and united each time."""
+    from PIL import Image, UnidentifiedImageError
+
     try:
         with Image.open(image_path) as img:
             gray = np.asarray(img.convert("L"), dtype=float)
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as exc:  # Pillow: a malformed header
-        raise MapError(f"{where}: image {image_path} cannot be read ({exc})") from None
+        raise MapError(f"map file {source}: image {image_path} cannot be read ({exc})") from None
     p = gray / 255.0 if negate else (255.0 - gray) / 255.0
     occupied = p > occupied_thresh
     if unknown == "occupied":
         occupied |= p >= free_thresh  # neither free nor occupied: unknown
-    return OccupancyGrid(occupied[::-1].copy(), resolution, (ox, oy, yaw[0] if yaw else 0.0), str(path))
+    cells = occupied[::-1].copy()
+    cells.flags.writeable = False  # shared by every scenario built from this map
+    return OccupancyGrid(cells, resolution, origin, source)

@@ -19,14 +19,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config import register_configs
 from stafpipe.errors import StafpipeError
-from stafpipe.launch import (
-    MARKER,
-    STAGE_FUNCTIONS,
-    config_hash,
-    config_name,
-    inputs_hash,
-    launch,
-)
+from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, inputs_hash, launch
 from stafpipe.paths import conf_dir, pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")

@@ -12,11 +12,6 @@ from hydra.errors import HydraException, MissingConfigException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-# Flags after which Hydra reads a value, and flags that make the run something else than one job of the config.
-_FLAGS_WITH_VALUE = {"--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
-                     "--config-dir", "-cd", "--experimental-rerun"}
-
-
 def jobs_to_check(overrides: Sequence[str]) -> list[list[str]] | None:
     """Overrides of jobs that together try every value a command line gives: the first job (a sweep's first value
     of each swept key) and, per swept key, one job for each of its other values. None where flags other than -m make
