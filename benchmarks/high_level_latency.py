@@ -22,7 +22,7 @@ from stafpipe.highlevel.model import NumpyGraphCut
 from stafpipe.highlevel.partition import hard_assignment
 
 
-def timed(fn, repeats: int) -> tuple[float, object]:  # noqa: ANN001
+def timed(fn, repeats: int) -> tuple[float, object]:
     out, times = None, []
     for _ in range(repeats):
         start = time.perf_counter()
@@ -39,8 +39,10 @@ def main() -> None:
     model, _ = load_checkpoint()
     cfg = model.cfg
     fast = NumpyGraphCut(model)
-    print(f"{'robots':>7} | {'formation':>9} | {'m':>2} | {'edges':>6} | {'graph ms':>8} | {'network ms':>10} | "
-          f"{'assign+repair ms':>16} | {'total ms':>8}")
+    print(
+        f"{'robots':>7} | {'formation':>9} | {'m':>2} | {'edges':>6} | {'graph ms':>8} | {'network ms':>10} | "
+        f"{'assign+repair ms':>16} | {'total ms':>8}"
+    )
     print("-" * 92)
     for n, kind, m in ((10, "circle", 2), (100, "square", 3), (1000, "square", 4)):
         slots = formation_slots(kind, n, 1.0)
@@ -55,8 +57,10 @@ def main() -> None:
                 t_net, y = timed(lambda: model(batch).numpy(), repeats)
         t_assign, _ = timed(lambda: hard_assignment(y, graph.edges, m), repeats)
         total = t_graph + t_net + t_assign
-        print(f"{n:>7} | {kind:>9} | {m:>2} | {graph.edges.shape[1]:>6} | {t_graph:>8.3f} | {t_net:>10.3f} | "
-              f"{t_assign:>16.3f} | {total:>8.3f}")
+        print(
+            f"{n:>7} | {kind:>9} | {m:>2} | {graph.edges.shape[1]:>6} | {t_graph:>8.3f} | {t_net:>10.3f} | "
+            f"{t_assign:>16.3f} | {total:>8.3f}"
+        )
 
 
 if __name__ == "__main__":

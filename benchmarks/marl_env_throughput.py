@@ -19,7 +19,7 @@ from stafpipe.learning.rollout import commands
 from stafpipe.marl_env import BatchedTeamEnv, parallel_env
 
 
-def rate(step, steps: int, robots: int) -> float:  # noqa: ANN001
+def rate(step, steps: int, robots: int) -> float:
     step()
     began = time.perf_counter()
     for _ in range(steps):
@@ -39,8 +39,9 @@ def main() -> None:
     env.reset(0)
     shape = (args.worlds, env.n, 2)
     native = env.worlds
-    native_rate = rate(lambda: native.step(commands(rng.uniform(-1, 1, shape), native.heading, 1.0)), args.steps,
-                       args.worlds * env.n)
+    native_rate = rate(
+        lambda: native.step(commands(rng.uniform(-1, 1, shape), native.heading, 1.0)), args.steps, args.worlds * env.n
+    )
     env.reset(0)
     api_rate = rate(lambda: env.step(rng.uniform(-1, 1, shape)), args.steps, args.worlds * env.n)
     pz = parallel_env(scenario="corridor", method=args.method, episode_steps=10**9)
@@ -51,7 +52,9 @@ def main() -> None:
     print("| interface | worlds | robot-steps/s | vs native |")
     print("|---|---|---|---|")
     print(f"| native Worlds.step | {args.worlds} | {native_rate:,.0f} | 100 % |")
-    print(f"| BatchedTeamEnv.step (features + reward) | {args.worlds} | {api_rate:,.0f} | {100 * api_rate / native_rate:.0f} % |")
+    print(
+        f"| BatchedTeamEnv.step (features + reward) | {args.worlds} | {api_rate:,.0f} | {100 * api_rate / native_rate:.0f} % |"  # noqa: E501
+    )
     print(f"| PettingZoo ParallelEnv.step | 1 | {pz_rate:,.0f} | {100 * pz_rate / native_rate:.0f} % |")
 
 

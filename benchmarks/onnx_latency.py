@@ -21,7 +21,7 @@ import torch
 from stafpipe.export_onnx import NETWORKS, example_inputs, export, load_network
 
 
-def timed(call, repeats: int) -> tuple[float, float]:  # noqa: ANN001
+def timed(call, repeats: int) -> tuple[float, float]:
     for _ in range(50):
         call()
     times = []
@@ -40,8 +40,10 @@ def main() -> None:
     torch.set_num_threads(1)
     options = ort.SessionOptions()
     options.intra_op_num_threads, options.inter_op_num_threads = 1, 1
-    print(f"robots {args.robots}, {args.repeats} calls each, 1 thread (onnxruntime {ort.__version__}, torch "
-          f"{torch.__version__})")
+    print(
+        f"robots {args.robots}, {args.repeats} calls each, 1 thread (onnxruntime {ort.__version__}, torch "
+        f"{torch.__version__})"
+    )
     print("| network | onnxruntime median ms | onnxruntime p99 ms | torch median ms | torch p99 ms |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:

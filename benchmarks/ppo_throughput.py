@@ -48,7 +48,9 @@ def main() -> None:
         update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))
         upd = time.perf_counter() - start
         samples = ro.rewards.numel()
-        print(f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {samples / (rollout + upd):>21,.0f}")
+        print(
+            f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {samples / (rollout + upd):>21,.0f}"
+        )
 
 
 if __name__ == "__main__":

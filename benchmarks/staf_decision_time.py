@@ -58,10 +58,12 @@ def ten_robots(episodes: int) -> tuple[float, float, float]:
 def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
     """(plan ms, features ms, network ms, edges) for 1,000 robots."""
     base = load_named_scenario("corridor")
-    spec = dataclasses.replace(base.spec, world=dataclasses.replace(base.spec.world, xmin=-50, xmax=1050, ymin=-50,
-                                                                    ymax=60), obstacles=[],
-                               team=dataclasses.replace(base.spec.team, formation="square", n=1000, start=[0.0, 6.0],
-                                                        goal=[1000.0, 6.0]))
+    spec = dataclasses.replace(
+        base.spec,
+        world=dataclasses.replace(base.spec.world, xmin=-50, xmax=1050, ymin=-50, ymax=60),
+        obstacles=[],
+        team=dataclasses.replace(base.spec.team, formation="square", n=1000, start=[0.0, 6.0], goal=[1000.0, 6.0]),
+    )
     sc = build_scenario(spec)
     policy, _ = load_policy("", "staf")
     template = sc.template()
@@ -76,7 +78,9 @@ def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
         t0 = time.perf_counter()
         target = plan.step(pos, 0.1)
         t1 = time.perf_counter()
-        own, receiver, diff = staf_pairs(pos, vel, heading, obstacle, target, plan.labels, policy.cfg.goal_clip, 2.0, 2.0)
+        own, receiver, diff = staf_pairs(
+            pos, vel, heading, obstacle, target, plan.labels, policy.cfg.goal_clip, 2.0, 2.0
+        )
         t2 = time.perf_counter()
         with torch.inference_mode():
             policy.act_sparse(torch.from_numpy(own), torch.from_numpy(receiver), torch.from_numpy(diff))
@@ -97,8 +101,10 @@ def main() -> None:
     print("| team | per step (median) | 99th percentile step | split step (cut, median) | target |")
     print("|---|---|---|---|---|")
     print(f"| 10 robots, corridor, method=staf act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
-    print(f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "
-          f"{plan + feat + net:.1f} ms | - | - | <= 50 ms |")
+    print(
+        f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "
+        f"{plan + feat + net:.1f} ms | - | - | <= 50 ms |"
+    )
 
 
 if __name__ == "__main__":

@@ -27,9 +27,13 @@ from stafpipe.world import WorldConfig
 
 def _pillars() -> ScenarioConfig:
     pillars = [{"circle": {"center": [float(x), float(y)], "radius": 0.6}} for x in (25, 35, 45) for y in (-8, 0, 8)]
-    return ScenarioConfig(name="zhu_pillars100", world=WorldBounds(0, -20, 70, 20), obstacles=pillars,
-                          team=TeamSpec(n=100, formation="square", spacing=1.0, start=(8.0, 0.0), goal=(60.0, 0.0),
-                                        heading_deg=0.0), time_limit=120.0)
+    return ScenarioConfig(
+        name="zhu_pillars100",
+        world=WorldBounds(0, -20, 70, 20),
+        obstacles=pillars,
+        team=TeamSpec(n=100, formation="square", spacing=1.0, start=(8.0, 0.0), goal=(60.0, 0.0), heading_deg=0.0),
+        time_limit=120.0,
+    )
 
 
 def scenario_for(n: int) -> ScenarioConfig:
@@ -60,13 +64,21 @@ def main() -> None:
             rows.append(controller.episode_stats())
             most = max(most, int(values["subteams_max"]))
         table = timing_table(pd.DataFrame(rows))
-        print(f"\n{n} robots, {spec.name}, {args.episodes} episodes of {args.seconds:g} s simulated "
-              f"(at most {most} subteams)")
+        print(
+            f"\n{n} robots, {spec.name}, {args.episodes} episodes of {args.seconds:g} s simulated "
+            f"(at most {most} subteams)"
+        )
         print(markdown_table(table.astype(object).where(table.notna(), "--"), digits=3))
         total = float(table["Mean."].iloc[-1])
         cycle = float(table.set_index("Computations").loc[["Convex regions", "Local formation control"], "Mean."].sum())
-        summary.append({"robots": n, "total (sum of means) ms": total, "mean 5 Hz cycle ms": cycle,
-                        "target": "<= 2.4 ms" if n == 4 else "report"})
+        summary.append(
+            {
+                "robots": n,
+                "total (sum of means) ms": total,
+                "mean 5 Hz cycle ms": cycle,
+                "target": "<= 2.4 ms" if n == 4 else "report",
+            }
+        )
     print("\nsummary\n" + markdown_table(pd.DataFrame(summary), digits=3))
 
 

@@ -48,8 +48,14 @@ def test_subteam_count_and_classical_studies_give_m_nonempty_subteams(workdir) -
 
 @pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_loss_terms_study_trains_each_variant_and_checks_findings(workdir) -> None:
-    df = _run(workdir, "ablate.variants=[a_balance_only,full]", "ablate.train_instances=32", "ablate.epochs=2",
-              "ablate.teams=8", "train_high.batch_size=16")
+    df = _run(
+        workdir,
+        "ablate.variants=[a_balance_only,full]",
+        "ablate.train_instances=32",
+        "ablate.epochs=2",
+        "ablate.teams=8",
+        "train_high.batch_size=16",
+    )
     assert len(df) == 2 * 2 * 8 and set(df.labels) == {"raw", "repaired"}
     run = job_dirs(workdir / "outputs")[-1]
     assert "| a_balance_only | splits evenly |" in (run / "findings.md").read_text()

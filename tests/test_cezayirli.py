@@ -34,18 +34,35 @@ def test_cost_gradients_have_known_values() -> None:
 
 
 def test_theorem_1_constraints_hold_on_every_step_of_a_random_run() -> None:
-    spec = build_scenario(ScenarioConfig(name="open", world=WorldBounds(0, 0, 200, 200), obstacles=[],
-                                         reference_path=[[150.0, 100.0]],
-                                         team=TeamSpec(n=8, formation="circle", spacing=6.0, start=(100.0, 100.0),
-                                                       goal=(150.0, 150.0), heading_deg=0.0)))
-    spec = build_scenario(type(spec.spec)(**{**spec.spec.__dict__, "robot": type(spec.spec.robot)(
-        radius=0.75, max_speed=2.0, max_accel=100.0, drive="holonomic", max_turn_rate=2.0)}))
+    spec = build_scenario(
+        ScenarioConfig(
+            name="open",
+            world=WorldBounds(0, 0, 200, 200),
+            obstacles=[],
+            reference_path=[[150.0, 100.0]],
+            team=TeamSpec(
+                n=8, formation="circle", spacing=6.0, start=(100.0, 100.0), goal=(150.0, 150.0), heading_deg=0.0
+            ),
+        )
+    )
+    spec = build_scenario(
+        type(spec.spec)(
+            **{
+                **spec.spec.__dict__,
+                "robot": type(spec.spec.robot)(
+                    radius=0.75, max_speed=2.0, max_accel=100.0, drive="holonomic", max_turn_rate=2.0
+                ),
+            }
+        )
+    )
     sensing = SensingConfig(radius=D_MAX, range_error=DR, bearing_error_deg=12.0, occlusion=True)
     cfg = CezayirliConfig(initial_cost="spread", switches=[Switch(at=[120.0, 100.0], cost="line", radius=30.0)])
     worlds = Worlds([spec], sensing)
     obs = worlds.reset([3]).world(0)
     controller = CezayirliController(cfg)
-    controller.reset(TeamInfo(spec, obs.position.copy(), worlds.goal[0].copy(), spec.template(), np.zeros((0, 2)), 10.0))
+    controller.reset(
+        TeamInfo(spec, obs.position.copy(), worlds.goal[0].copy(), spec.template(), np.zeros((0, 2)), 10.0)
+    )
     d_m = D_MAX - DR
     checked = 0
     for _ in range(150):
@@ -83,20 +100,24 @@ def test_v_lines_up_only_behind_robots_ahead_along_its_course() -> None:
     x = np.concatenate([level, leader])
     course = np.array([1.0, 0.0])
     # the paper's rule (7) picks the nearer, level robot; with the course it picks the leader
-    assert np.allclose(cost_gradient(x, "v", cfg, e_l), (-level[0] + 4.0 * e_l)
-                       + cfg.beta * 2 * (np.linalg.norm(leader[0]) - 4.0) * (-leader[0]) / np.linalg.norm(leader[0]))
-    assert np.allclose(cost_gradient(x, "v", cfg, e_l, course), (-leader[0] + 4.0 * e_l)
-                       + cfg.beta * 2 * (3.0 - 4.0) * (-level[0]) / 3.0)
+    assert np.allclose(
+        cost_gradient(x, "v", cfg, e_l),
+        (-level[0] + 4.0 * e_l)
+        + cfg.beta * 2 * (np.linalg.norm(leader[0]) - 4.0) * (-leader[0]) / np.linalg.norm(leader[0]),
+    )
+    assert np.allclose(
+        cost_gradient(x, "v", cfg, e_l, course),
+        (-leader[0] + 4.0 * e_l) + cfg.beta * 2 * (3.0 - 4.0) * (-level[0]) / 3.0,
+    )
 
 
 @pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_simulation_2_forms_a_v_behind_the_leader(workdir) -> None:
     """Simulation 2 (Fig. 5): 100 s in, five robots on each side of the leader's course, each arm a chain of about
     d_1 spacing slanting back from the leader (the leader is robot 0, the front of the start circle)."""
+    from conftest import job_dirs
     from stafpipe.episode_log import read_episode
     from stafpipe.launch import launch
-
-    from conftest import job_dirs
 
     assert launch("eval", ["experiment=cezayirli_sim2", "scenario.time_limit=100", "eval.episodes=1"]) == 0
     [run] = job_dirs(workdir / "outputs" / "eval")

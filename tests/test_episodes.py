@@ -72,7 +72,7 @@ def test_a_flipped_byte_anywhere_is_found(workdir) -> None:
     assert check(data) == []
     rng = np.random.default_rng(0)
     # the head and tail records byte by byte (magic, Header, DataEnd, summary, Footer), the rest sampled
-    spots = [*range(0, 80), *range(len(data) - 700, len(data)), *rng.integers(80, len(data) - 700, 150)]
+    spots = [*range(80), *range(len(data) - 700, len(data)), *rng.integers(80, len(data) - 700, 150)]
     for q in spots:
         flipped = bytearray(data)
         flipped[q] ^= 1 << int(rng.integers(8))
@@ -104,7 +104,7 @@ def test_recover_keeps_every_intact_chunk_after_a_damaged_one(workdir) -> None:
     kept, _, damage = recover(damaged_path, workdir / "flip.recovered.mcap")
     scan = intact_records(bytes(damaged))
     assert scan.chunks == whole.chunks - 1 and kept == len(scan.messages) > 0.5 * len(whole.messages)
-    assert [str(d) for d in damage][0].startswith("byte")
+    assert next(str(d) for d in damage).startswith("byte")
     full, part = read_episode(path), read_episode(workdir / "flip.recovered.mcap")
     assert part.time[-1] == full.time[-1] and 0 < len(part.time) < len(full.time)  # the end is kept
 

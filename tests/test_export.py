@@ -45,8 +45,9 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
         f = adapter.step(obs, world_cfg.control_dt).features
         if t % 10 == 0:
             out.append((f.own[0], f.edge[0], f.mask[0]))
-        act = teacher_actions("avoiding", adapter.teacher_aim() - obs.position, obs, worlds.robot.radius,
-                              worlds.robot.max_speed, 2.0)
+        act = teacher_actions(
+            "avoiding", adapter.teacher_aim() - obs.position, obs, worlds.robot.radius, worlds.robot.max_speed, 2.0
+        )
         obs, _ = worlds.step(commands(act, worlds.heading, worlds.robot.max_speed))
     return out
 
@@ -89,8 +90,9 @@ def test_graph_cut_onnx_matches_the_sparse_torch_network(workdir) -> None:
         graph = team_graph(team, cfg.features, cfg.radius)
         adjacency = np.zeros((n, n), dtype=bool)
         adjacency[graph.edges[1], graph.edges[0]] = True
-        got = session.run(["assignment"], {"x": graph.x.astype(np.float32), "adjacency": adjacency,
-                                           "m": np.array(m, dtype=np.int64)})[0]
+        got = session.run(
+            ["assignment"], {"x": graph.x.astype(np.float32), "adjacency": adjacency, "m": np.array(m, dtype=np.int64)}
+        )[0]
         with torch.no_grad():
             want = model(collate([graph], [m])).numpy()
         assert got.shape == (n, cfg.m_max)

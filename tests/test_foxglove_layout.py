@@ -7,11 +7,10 @@ import json
 import re
 
 import pytest
-
-from conftest import job_dirs
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from conftest import job_dirs
 from stafpipe.episode_log import TOPICS
 from stafpipe.launch import launch
 from stafpipe.paths import package_dir
@@ -52,7 +51,7 @@ def test_every_path_of_the_layout_reads_a_field_of_an_episode_log(workdir) -> No
         if path == topic:
             continue
         value = first[topic]  # a field path: read it off the topic's first message
-        for name, index in re.findall(r"\.(\w+)(?:\[(\d+)\])?", path[len(topic):]):
+        for name, index in re.findall(r"\.(\w+)(?:\[(\d+)\])?", path[len(topic) :]):
             assert hasattr(value, name), f"{path}: {type(value).__name__} has no field {name}"
             value = getattr(value, name)
             if index:

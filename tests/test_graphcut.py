@@ -13,7 +13,14 @@ from stafpipe.highlevel.config import HighLevelConfig
 from stafpipe.highlevel.graphs import Team, make_batch, radius_edges
 from stafpipe.highlevel.loss import balance_printed, loss_terms
 from stafpipe.highlevel.model import DeepGraphCut
-from stafpipe.highlevel.partition import balance_sizes, balanced_kmeans, choose_m, formation_width, partition_stats, repair
+from stafpipe.highlevel.partition import (
+    balance_sizes,
+    balanced_kmeans,
+    choose_m,
+    formation_width,
+    partition_stats,
+    repair,
+)
 
 CFG = HighLevelConfig()
 
@@ -34,7 +41,9 @@ def test_loss_terms_known_answers_on_two_clusters() -> None:
     batch = make_batch([team], CFG.features, 2.0)
     right = loss_terms(one_hot([0] * 4 + [1] * 4, 2), batch)
     assert right["adjacency"].item() == 0.0 and right["balance"].item() == 0.0
-    assert right["goal"].item() == pytest.approx(1.0)  # each half 20 m from its goals, the team 20 m: (4 * 20 + 4 * 20) / (8 * 20)
+    assert right["goal"].item() == pytest.approx(
+        1.0
+    )  # each half 20 m from its goals, the team 20 m: (4 * 20 + 4 * 20) / (8 * 20)
     mixed = loss_terms(one_hot([0, 1] * 4, 2), batch)
     assert mixed["adjacency"].item() == pytest.approx(8 / 12)  # 12 directed edges per square, 8 cut by alternation
     together = loss_terms(one_hot([0] * 8, 2), batch)
@@ -136,8 +145,12 @@ def test_checkpoint_round_trip_and_clear_errors(tmp_path) -> None:
     bad_shape = torch.load(path, weights_only=True)
     bad_shape["high"]["hidden"] = 16
     torch.save(bad_shape, tmp_path / "shape.pt")
-    for name, message in [("missing.pt", "no such checkpoint"), ("junk.pt", "not a readable checkpoint"),
-                          ("other.pt", "not a stafpipe high-level checkpoint"), ("shape.pt", "weights do not fit")]:
+    for name, message in [
+        ("missing.pt", "no such checkpoint"),
+        ("junk.pt", "not a readable checkpoint"),
+        ("other.pt", "not a stafpipe high-level checkpoint"),
+        ("shape.pt", "weights do not fit"),
+    ]:
         with pytest.raises(StafpipeError, match=message):
             load_checkpoint(tmp_path / name)
 
@@ -150,7 +163,11 @@ def test_numpy_forward_equals_the_torch_network() -> None:
         torch.manual_seed(3)
         net = DeepGraphCut(HighLevelConfig(attention=attention)).eval()
         fast = NumpyGraphCut(net)
-        for team in (_circle_team(7, 2), _circle_team(12, 4, 2.0), Team(np.array([[0.0, 0], [9, 9]]), np.zeros((2, 2)), 1)):
+        for team in (
+            _circle_team(7, 2),
+            _circle_team(12, 4, 2.0),
+            Team(np.array([[0.0, 0], [9, 9]]), np.zeros((2, 2)), 1),
+        ):
             with torch.no_grad():
                 expected = net(make_batch([team], CFG.features, CFG.radius)).numpy()
             g = team_graph(team, CFG.features, CFG.radius)

@@ -46,8 +46,10 @@ def test_controller_acts_as_the_rollout_adapter_does(method) -> None:
     """The evaluation controller and the training rollout drive the same network through the same adapter: the
     controller's command equals the policy mean on the adapter's batched features, step after step."""
     sc = load_named_scenario("corridor")
-    cfg = {"dgnn": lambda: __import__("stafpipe.controllers.dgnn", fromlist=["x"]).DGNNConfig(),
-           "staf": StafMethodConfig}[method]()
+    cfg = {
+        "dgnn": lambda: __import__("stafpipe.controllers.dgnn", fromlist=["x"]).DGNNConfig(),
+        "staf": StafMethodConfig,
+    }[method]()
     ctrl = make_controller(cfg)
     worlds = Worlds([sc], SensingConfig())
     obs = worlds.reset([3])
@@ -88,8 +90,13 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
 def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
     sc = load_named_scenario("corridor")
     ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
-    tc = TrainPPOConfig(method="staf", worlds=2, episode_steps=30, policy=PolicyConfig(hidden=32),
-                        imitation=ImitationConfig(epochs=200, rollouts=1, teacher="proportional", noise=0.0))
+    tc = TrainPPOConfig(
+        method="staf",
+        worlds=2,
+        episode_steps=30,
+        policy=PolicyConfig(hidden=32),
+        imitation=ImitationConfig(epochs=200, rollouts=1, teacher="proportional", noise=0.0),
+    )
     adapter = ADAPTERS["staf"](tc.policy, tc.reward, tc.plan, 2.0)
     torch.manual_seed(0)
     policy = adapter.network(tc.policy)
@@ -105,8 +112,9 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
         return float(np.abs(got - want).mean())
 
     before = error()
-    stats = ppo.imitate(policy, adapter, lambda rng, k: [(sc, path, ctx.passage_width)] * k, WorldConfig(),
-                        SensingConfig(), tc, seed=0)
+    stats = ppo.imitate(
+        policy, adapter, lambda rng, k: [(sc, path, ctx.passage_width)] * k, WorldConfig(), SensingConfig(), tc, seed=0
+    )
     assert stats["imitation/samples"] == 2 * 30 * 10
     assert error() < min(0.1, before / 4)  # the network now does roughly what the teacher does
 
@@ -114,8 +122,20 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
 @pytest.mark.slow
 def test_staf_ablation_low_levels_run_and_are_refused_when_unknown(workdir) -> None:
     for low in ("proportional", "avoiding"):
-        assert launch("eval", ["method=staf", f"method.low_level={low}", "method.plan.adapt=geometric",
-                               "eval.episodes=1", "scenario.time_limit=4", f"eval.label={low}"]) == 0
+        assert (
+            launch(
+                "eval",
+                [
+                    "method=staf",
+                    f"method.low_level={low}",
+                    "method.plan.adapt=geometric",
+                    "eval.episodes=1",
+                    "scenario.time_limit=4",
+                    f"eval.label={low}",
+                ],
+            )
+            == 0
+        )
     assert launch("eval", ["method=staf", "method.low_level=magic", "eval.episodes=1"]) == 2
     assert launch("eval", ["method=staf", "method.plan.adapt=squeeze", "eval.episodes=1"]) == 2
     runs = job_dirs(workdir)
@@ -133,11 +153,33 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
     # the shipped STAF policy was trained with two subteams: m=auto is another plan than the one it learned on
     assert launch("eval", ["method=staf", "method.plan.m=auto", "eval.episodes=1", "scenario.time_limit=2"]) == 2
     assert not job_dirs(workdir)
-    assert launch("eval", ["method=staf", "method.plan.m=auto", "method.allow_mismatch=true", "eval.episodes=1",
-                           "scenario.time_limit=2"]) == 0
+    assert (
+        launch(
+            "eval",
+            [
+                "method=staf",
+                "method.plan.m=auto",
+                "method.allow_mismatch=true",
+                "eval.episodes=1",
+                "scenario.time_limit=2",
+            ],
+        )
+        == 0
+    )
     # the hand-made low levels use no checkpoint: nothing to compare
-    assert launch("eval", ["method=staf", "method.low_level=proportional", "method.plan.adapt=nominal",
-                           "eval.episodes=1", "scenario.time_limit=2"]) == 0
+    assert (
+        launch(
+            "eval",
+            [
+                "method=staf",
+                "method.low_level=proportional",
+                "method.plan.adapt=nominal",
+                "eval.episodes=1",
+                "scenario.time_limit=2",
+            ],
+        )
+        == 0
+    )
     made_by = {"train_ppo": {"plan": {"m": "2", "adapt": "geometric"}}, "sensing": {"radius": 3.0}}
     differ = checkpoint_mismatch(StafMethodConfig(), made_by)
     assert differ == {"method.sensing_radius": (2.0, 3.0)}
@@ -149,13 +191,31 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
 
 @pytest.mark.slow
 def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> None:
-    assert launch("generate-maps", ["seed=5", "maps.count=2", "maps.team_sizes=[4,4]", "maps.drives=[holonomic]",
-                                    "hydra.run.dir=maps"]) == 0
-    assert launch("train-ppo", ["train_ppo.method=staf", "train_ppo.scenarios=[maps/maps]", "train_ppo.formations=[]",
-                                "train_ppo.iterations=1", "train_ppo.worlds=2", "train_ppo.episode_steps=6",
-                                "train_ppo.policy.hidden=16", "train_ppo.imitation.epochs=1",
-                                "hydra.run.dir=train"]) == 0
-    policy, made_by = load_policy(workdir / "train" / "policy.pt", "staf")
+    assert (
+        launch(
+            "generate-maps",
+            ["seed=5", "maps.count=2", "maps.team_sizes=[4,4]", "maps.drives=[holonomic]", "hydra.run.dir=maps"],
+        )
+        == 0
+    )
+    assert (
+        launch(
+            "train-ppo",
+            [
+                "train_ppo.method=staf",
+                "train_ppo.scenarios=[maps/maps]",
+                "train_ppo.formations=[]",
+                "train_ppo.iterations=1",
+                "train_ppo.worlds=2",
+                "train_ppo.episode_steps=6",
+                "train_ppo.policy.hidden=16",
+                "train_ppo.imitation.epochs=1",
+                "hydra.run.dir=train",
+            ],
+        )
+        == 0
+    )
+    _policy, made_by = load_policy(workdir / "train" / "policy.pt", "staf")
     assert made_by["training_maps"] == sorted(made_by["training_maps"]) and len(made_by["training_maps"]) == 2
     assert all(name.startswith("gen5_") for name in made_by["training_maps"])
     assert launch("train-ppo", ["train_ppo.scenarios=[maps/nothing_here]", "train_ppo.iterations=1"]) == 2
@@ -166,8 +226,21 @@ def test_plot_table_draws_labelled_variants_side_by_side(workdir) -> None:
     levels figure (SR, collisions, CFI per map and variant)."""
     import pandas as pd
 
-    row = {"method": "staf", "formation": "line", "n": 10, "drive": "holonomic", "scenario": "doorway", "sr": 1.0,
-           "tt": 30.0, "cfi_0.5": 0.8, "cfi_0.1": 0.7, "cfi_0.01": 0.7, "tt_ratio": 1.4, "collisions": 0.0, "eta": 1.3}
+    row = {
+        "method": "staf",
+        "formation": "line",
+        "n": 10,
+        "drive": "holonomic",
+        "scenario": "doorway",
+        "sr": 1.0,
+        "tt": 30.0,
+        "cfi_0.5": 0.8,
+        "cfi_0.1": 0.7,
+        "cfi_0.01": 0.7,
+        "tt_ratio": 1.4,
+        "collisions": 0.0,
+        "eta": 1.3,
+    }
     dirs = []
     for label, sr in (("a-no-learning", 0.5), ("b-learned", 1.0)):
         d = workdir / label

@@ -29,8 +29,14 @@ def test_every_family_gives_a_passable_map_with_free_start_and_goal(family) -> N
 
 @pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_widths_team_sizes_formations_and_drives_follow_the_config() -> None:
-    cfg = MapsConfig(count=4, families=["corridor", "doorway"], width=[1.0, 1.2], team_sizes=[5, 6],
-                     formations=["wedge"], drives=["diff_drive"])
+    cfg = MapsConfig(
+        count=4,
+        families=["corridor", "doorway"],
+        width=[1.0, 1.2],
+        team_sizes=[5, 6],
+        formations=["wedge"],
+        drives=["diff_drive"],
+    )
     for spec in generate_maps(cfg, seed=2):
         assert spec.team.n in (5, 6) and spec.team.formation == "wedge" and spec.robot.drive == "diff_drive"
         boxes = [o["box"] for o in spec.obstacles]

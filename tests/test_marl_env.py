@@ -33,7 +33,7 @@ def test_parallel_env_passes_the_pettingzoo_api_test(method, formation) -> None:
     assert obs["robot_0"].shape == env.observation_space("robot_0").shape
     done = False
     while not done:
-        _, rewards, terms, truncs, infos = env.step({a: np.array([1.0, 0.0], np.float32) for a in env.agents})
+        _, _rewards, terms, truncs, infos = env.step({a: np.array([1.0, 0.0], np.float32) for a in env.agents})
         done = all(truncs.values())
     assert not any(terms.values()) and env.agents == []
     assert {"success_rate", "collisions_per_episode", "episode_return"} <= set(infos["robot_0"])
@@ -79,8 +79,10 @@ def test_batched_env_rewards_are_the_trainers(method) -> None:
         rewards.append(reward)
     assert np.allclose(np.stack(rewards), rollout.rewards.numpy(), atol=1e-5)
     assert np.abs(np.stack(rewards)).max() > 0.01  # robots moved and were rewarded for it
-    assert info["success_rate"] == stats["success_rate"] and info["collisions_per_episode"] == stats[
-        "collisions_per_episode"]
+    assert (
+        info["success_rate"] == stats["success_rate"]
+        and info["collisions_per_episode"] == stats["collisions_per_episode"]
+    )
 
 
 def test_torchrl_drives_the_environment_through_its_pettingzoo_wrapper() -> None:
@@ -91,6 +93,6 @@ def test_torchrl_drives_the_environment_through_its_pettingzoo_wrapper() -> None
 
     env = PettingZooWrapper(parallel_env(scenario="corridor", episode_steps=100), use_mask=False)
     rollout = env.rollout(300, break_when_any_done=False)  # random actions, three episodes (reset on truncation)
-    group = rollout["agents"] if "agents" in rollout.keys() else rollout[next(iter(env.group_map))]
+    group = rollout["agents"] if "agents" in rollout.keys() else rollout[next(iter(env.group_map))]  # noqa: SIM118 (a TensorDict)
     assert group["observation"].shape[:2] == (300, 10) and group["action"].shape[-1] == 2
     assert int(rollout["next", "truncated"].sum()) == 3

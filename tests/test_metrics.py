@@ -29,8 +29,12 @@ def test_more_distortion_scores_less() -> None:
     rng = np.random.default_rng(0)
     for kind in ("circle", "wedge", "line", "square"):
         mean = {
-            s: np.mean([formation_integrity(formation_slots(kind, 9, 1.0) + rng.normal(0, s, (9, 2)), kind, 1.0, 0.0)
-                        for _ in range(50)])
+            s: np.mean(
+                [
+                    formation_integrity(formation_slots(kind, 9, 1.0) + rng.normal(0, s, (9, 2)), kind, 1.0, 0.0)
+                    for _ in range(50)
+                ]
+            )
             for s in (0.02, 0.1, 0.3)
         }
         assert 1.0 > mean[0.02] > mean[0.1] > mean[0.3], (kind, mean)
@@ -56,7 +60,9 @@ def test_wedge_is_judged_as_a_shape_whichever_way_it_faces(n) -> None:
     for facing in rng.uniform(-math.pi, math.pi, 4):
         p = place(wedge, (1.0, 2.0), facing)
         # the heading passed (a subteam drifting backwards) no longer decides the apex
-        assert formation_integrity(p, "wedge", 1.0, facing + math.pi, 90.0) == pytest.approx(1.0, abs=1e-6 if n <= 16 else 0.05)
+        assert formation_integrity(p, "wedge", 1.0, facing + math.pi, 90.0) == pytest.approx(
+            1.0, abs=1e-6 if n <= 16 else 0.05
+        )
         assert v_integrity(p, facing + math.pi) < 0.5  # as judged facing the other way
     # not every shape is a wedge: three in a row, and a wedge with one arm folded in
     assert wedge_shape_integrity(np.array([[0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])) == 0.0

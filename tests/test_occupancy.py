@@ -14,7 +14,7 @@ from stafpipe.occupancy import MapError, load_map
 from stafpipe.scenario import ScenarioError, build_scenario, load_scenario_file
 from stafpipe.stages.train_ppo import load_named_scenario
 
-MAP_YAML = "image: {image}\nresolution: {resolution}\norigin: {origin}\nnegate: {negate}\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+MAP_YAML = "image: {image}\nresolution: {resolution}\norigin: {origin}\nnegate: {negate}\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"  # noqa: E501
 
 
 def draw(tmp_path, cells: np.ndarray, resolution=0.5, origin="[0.0, 0.0, 0.0]", negate=0, suffix=".pgm", **extra):
@@ -40,7 +40,12 @@ def box_cells() -> np.ndarray:
 def test_a_box_of_cells_becomes_its_rectangle(tmp_path, negate, suffix) -> None:
     grid = load_map(draw(tmp_path, box_cells(), negate=negate, suffix=suffix))
     assert grid.extent() == (0.0, 0.0, 6.0, 4.0)
-    assert list(grid.contains(np.array([[2.0, 1.5], [1.4, 1.5], [3.6, 1.5], [2.0, 2.1]]))) == [True, False, False, False]
+    assert list(grid.contains(np.array([[2.0, 1.5], [1.4, 1.5], [3.6, 1.5], [2.0, 2.1]]))) == [
+        True,
+        False,
+        False,
+        False,
+    ]
     corners = {p for seg in grid.wall_segments(0.5) for p in seg}
     assert corners == {(1.5, 1.0), (3.5, 1.0), (3.5, 2.0), (1.5, 2.0)}
 
@@ -64,9 +69,11 @@ def test_unknown_cells_are_walls_unless_the_scenario_says_free(tmp_path) -> None
 
 def test_a_scenario_takes_its_walls_and_world_from_the_map(tmp_path) -> None:
     draw(tmp_path, box_cells())
-    (tmp_path / "sc.yaml").write_text("name: boxed\noccupancy: {map: m.yaml}\n"
-                                      "team: {n: 2, formation: line, spacing: 0.6, start: [0.8, 3.0], goal: [5.0, 3.0]}\n"
-                                      "robot: {radius: 0.2}\n")
+    (tmp_path / "sc.yaml").write_text(
+        "name: boxed\noccupancy: {map: m.yaml}\n"
+        "team: {n: 2, formation: line, spacing: 0.6, start: [0.8, 3.0], goal: [5.0, 3.0]}\n"
+        "robot: {radius: 0.2}\n"
+    )
     sc = build_scenario(load_scenario_file(tmp_path / "sc.yaml"))
     w = sc.spec.world
     assert (w.xmin, w.ymin, w.xmax, w.ymax) == (0.0, 0.0, 6.0, 4.0)
@@ -74,19 +81,22 @@ def test_a_scenario_takes_its_walls_and_world_from_the_map(tmp_path) -> None:
     assert np.allclose(d, [0.0, 0.5, 0.5])  # inside the box, 0.5 m above it, 0.5 m from the left wall
 
 
-@pytest.mark.parametrize(("change", "named"), [
-    (lambda t: t.replace("image: m.pgm", "image: gone.pgm"), "gone.pgm does not exist"),
-    (lambda t: t.replace("image: m.pgm", "image: m.jpg"), "image must name a .pgm or .png"),
-    (lambda t: t.replace("resolution: 0.5", "resolution: 0"), "resolution must be a number > 0"),
-    (lambda t: t.replace("resolution: 0.5", "resolution: fine"), "resolution must be a number"),
-    (lambda t: t.replace("origin: [0.0, 0.0, 0.0]\n", ""), "misses the field 'origin'"),
-    (lambda t: t.replace("origin: [0.0, 0.0, 0.0]", "origin: [0.0]"), "origin must be [x, y, yaw]"),
-    (lambda t: t.replace("free_thresh: 0.196", "free_thresh: 0.9"), "free_thresh (0.9) must not exceed"),
-    (lambda t: t.replace("negate: 0", "negate: 2"), "negate must be 0 or 1"),
-    (lambda t: t + "mode: raw\n", "mode must be trinary or scale"),
-    (lambda t: "just words", "must be a mapping"),
-    (lambda t: "image: [", "not valid YAML"),
-])
+@pytest.mark.parametrize(
+    ("change", "named"),
+    [
+        (lambda t: t.replace("image: m.pgm", "image: gone.pgm"), "gone.pgm does not exist"),
+        (lambda t: t.replace("image: m.pgm", "image: m.jpg"), "image must name a .pgm or .png"),
+        (lambda t: t.replace("resolution: 0.5", "resolution: 0"), "resolution must be a number > 0"),
+        (lambda t: t.replace("resolution: 0.5", "resolution: fine"), "resolution must be a number"),
+        (lambda t: t.replace("origin: [0.0, 0.0, 0.0]\n", ""), "misses the field 'origin'"),
+        (lambda t: t.replace("origin: [0.0, 0.0, 0.0]", "origin: [0.0]"), "origin must be [x, y, yaw]"),
+        (lambda t: t.replace("free_thresh: 0.196", "free_thresh: 0.9"), "free_thresh (0.9) must not exceed"),
+        (lambda t: t.replace("negate: 0", "negate: 2"), "negate must be 0 or 1"),
+        (lambda t: t + "mode: raw\n", "mode must be trinary or scale"),
+        (lambda t: "just words", "must be a mapping"),
+        (lambda t: "image: [", "not valid YAML"),
+    ],
+)
 def test_a_bad_map_is_refused_naming_the_field(tmp_path, change, named) -> None:
     path = draw(tmp_path, box_cells())
     path.write_text(change(path.read_text()))
@@ -99,21 +109,26 @@ def test_an_unreadable_image_and_a_missing_map_are_refused(tmp_path) -> None:
     (tmp_path / "m.pgm").write_bytes(b"P5 not really")
     with pytest.raises(MapError, match="cannot be read"):
         load_map(path)
-    with pytest.raises(ScenarioError, match="occupancy.map: map file .*nowhere.yaml does not exist"):
+    with pytest.raises(ScenarioError, match=r"occupancy.map: map file .*nowhere.yaml does not exist"):
         (tmp_path / "sc.yaml").write_text("occupancy: {map: nowhere.yaml}\nteam: {start: [1, 1], goal: [2, 2]}\n")
         load_scenario_file(tmp_path / "sc.yaml")
 
 
-@pytest.mark.parametrize(("start", "goal", "named"), [
-    ("[2.5, 1.5]", "[5.0, 3.0]", "team.start .*its centre lies in an occupied cell"),
-    ("[0.8, 3.0]", "[2.5, 1.6]", "team.goal .*occupied cell"),
-    ("[1.0, 1.5]", "[5.0, 3.0]", "team.start .*robot 1.s slot lies in an occupied cell"),  # slots x 0.3 and 1.7
-])
+@pytest.mark.parametrize(
+    ("start", "goal", "named"),
+    [
+        ("[2.5, 1.5]", "[5.0, 3.0]", "team.start .*its centre lies in an occupied cell"),
+        ("[0.8, 3.0]", "[2.5, 1.6]", "team.goal .*occupied cell"),
+        ("[1.0, 1.5]", "[5.0, 3.0]", "team.start .*robot 1.s slot lies in an occupied cell"),  # slots x 0.3 and 1.7
+    ],
+)
 def test_a_team_starting_or_ending_in_a_wall_is_refused(tmp_path, start, goal, named) -> None:
     draw(tmp_path, box_cells())
-    (tmp_path / "sc.yaml").write_text(f"occupancy: {{map: m.yaml}}\nteam: {{n: 2, formation: line, spacing: 1.4, "
-                                      f"angle_deg: 90, start: {start}, goal: {goal}, heading_deg: 90}}\n"
-                                      "robot: {radius: 0.2}\n")
+    (tmp_path / "sc.yaml").write_text(
+        f"occupancy: {{map: m.yaml}}\nteam: {{n: 2, formation: line, spacing: 1.4, "
+        f"angle_deg: 90, start: {start}, goal: {goal}, heading_deg: 90}}\n"
+        "robot: {radius: 0.2}\n"
+    )
     with pytest.raises(ScenarioError, match=named):
         build_scenario(load_scenario_file(tmp_path / "sc.yaml"))
 
@@ -130,8 +145,8 @@ def test_the_shipped_office_map_loads_with_its_doorways_open() -> None:
 @pytest.mark.slow  # three STAF episodes, about 15 s
 def test_staf_crosses_the_office_map(workdir) -> None:
     import pandas as pd
-    from conftest import job_dirs
 
+    from conftest import job_dirs
     from stafpipe.launch import launch
 
     assert launch("eval", ["method=staf", "scenario=office_map", "eval.episodes=2", "eval.log_episodes=false"]) == 0

@@ -1,6 +1,6 @@
 import pytest
-from conftest import job_dirs
 
+from conftest import job_dirs
 from stafpipe.errors import StafpipeError
 from stafpipe.pipeline import run_pipeline
 
@@ -57,8 +57,11 @@ def test_step_reruns_when_a_file_it_reads_changes(workdir, capsys) -> None:
 
     scenario = workdir / "map.yaml"
     scenario.write_text((Path(__file__).parent / "data" / "s_example.yaml").read_text())
-    path = _write(workdir, "steps:\n  - {name: e, stage: eval, overrides: [experiment=smoke, method=straight, "
-                           f"'scenario.path={scenario}', scenario.time_limit=3, eval.episodes=1]}}\n")
+    path = _write(
+        workdir,
+        "steps:\n  - {name: e, stage: eval, overrides: [experiment=smoke, method=straight, "
+        f"'scenario.path={scenario}', scenario.time_limit=3, eval.episodes=1]}}\n",
+    )
     assert run_pipeline(path) == 0
     assert run_pipeline(path) == 0
     assert capsys.readouterr().out.count("skipped") == 1
@@ -78,16 +81,28 @@ def test_a_users_config_dir_serves_a_stage_and_every_pipeline_step(workdir, caps
     (mine / "scenario").mkdir(parents=True)
     text = (conf_dir() / "scenario" / "doorway.yaml").read_text().replace("name: doorway", "name: my_door")
     (mine / "scenario" / "my_door.yaml").write_text(text)
-    steps = "steps:\n  - {name: door, stage: eval, overrides: [method=straight, scenario=my_door, eval.episodes=1, " \
-            "scenario.time_limit=1]}\n"
+    steps = (
+        "steps:\n  - {name: door, stage: eval, overrides: [method=straight, scenario=my_door, eval.episodes=1, "
+        "scenario.time_limit=1]}\n"
+    )
     path = _write(workdir, "name: mine\n" + steps)
     without = CliRunner().invoke(app, ["run", path])
     assert without.exit_code == 2 and "scenario=my_door: no such scenario" in without.output
     assert CliRunner().invoke(app, ["run", path, "--config-dir", str(mine)]).exit_code == 0
     [run] = job_dirs(workdir)
     assert "name: my_door" in (run / "config.yaml").read_text()
-    single = CliRunner().invoke(app, ["eval", "--config-dir", str(mine), "scenario=my_door", "method=straight",
-                                      "eval.episodes=1", "scenario.time_limit=1"])
+    single = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "--config-dir",
+            str(mine),
+            "scenario=my_door",
+            "method=straight",
+            "eval.episodes=1",
+            "scenario.time_limit=1",
+        ],
+    )
     assert single.exit_code == 0 and len(job_dirs(workdir)) == 2
     bad = CliRunner().invoke(app, ["run", path, "--config-dir", str(workdir / "nowhere")])
     assert bad.exit_code == 2 and "not a directory" in bad.output

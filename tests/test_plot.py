@@ -11,13 +11,12 @@ from matplotlib.colors import to_rgba
 from matplotlib.patches import Polygon
 from typer.testing import CliRunner
 
+from conftest import job_dirs
 from stafpipe.cli import app
 from stafpipe.episode import scenario_from_yaml
 from stafpipe.episode_log import read_episode
 from stafpipe.launch import launch
 from stafpipe.plots.trajectories import trajectory_figure
-
-from conftest import job_dirs
 
 
 def _eval_run(workdir):

@@ -8,10 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
-from conftest import job_dirs, tensorboard_scalars
 from typer.testing import CliRunner
 
 import stafpipe.learning.ppo as ppo
+from conftest import job_dirs, tensorboard_scalars
 from stafpipe.cli import app
 from stafpipe.launch import launch
 from stafpipe.learning.checkpoint import load_policy
@@ -21,8 +21,13 @@ from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
 
-TINY = ["train_ppo.iterations=2", "train_ppo.worlds=2", "train_ppo.episode_steps=8", "train_ppo.policy.hidden=16",
-        "train_ppo.checkpoint_every=1"]
+TINY = [
+    "train_ppo.iterations=2",
+    "train_ppo.worlds=2",
+    "train_ppo.episode_steps=8",
+    "train_ppo.policy.hidden=16",
+    "train_ppo.checkpoint_every=1",
+]
 
 
 def test_gae_matches_a_hand_computed_case() -> None:
@@ -50,13 +55,28 @@ def test_guide_targets_follow_the_path_then_release_to_the_goal() -> None:
 
 
 def _train(out_dir, iterations=3, resume_from=None, on_iteration=lambda h: None, **extra):
-    tc = TrainPPOConfig(iterations=iterations, worlds=2, episode_steps=6, policy=PolicyConfig(hidden=16),
-                        **{"checkpoint_every": 1, "minibatches": 2, "epochs": 2, **extra})
+    tc = TrainPPOConfig(
+        iterations=iterations,
+        worlds=2,
+        episode_steps=6,
+        policy=PolicyConfig(hidden=16),
+        **{"checkpoint_every": 1, "minibatches": 2, "epochs": 2, **extra},
+    )
     corridor = load_named_scenario("corridor")
     path = np.array([[4.0, 6.0], [26.0, 6.0]])
     out_dir.mkdir(parents=True, exist_ok=True)
-    return ppo.train_ppo(tc, lambda rng, k: [(corridor, path, 2.4)] * k, WorldConfig(), SensingConfig(), 0.3, 4, out_dir, "h",
-                         resume_from, on_iteration)
+    return ppo.train_ppo(
+        tc,
+        lambda rng, k: [(corridor, path, 2.4)] * k,
+        WorldConfig(),
+        SensingConfig(),
+        0.3,
+        4,
+        out_dir,
+        "h",
+        resume_from,
+        on_iteration,
+    )
 
 
 def _same(a, b) -> bool:
@@ -105,16 +125,28 @@ def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
     policy, made_by = load_policy(run / "policy.pt", "dgnn")
     assert made_by["iterations"] == 2 and policy.cfg.hidden == 16
     board = tensorboard_scalars(run)
-    wanted = {"charts/success_rate", "charts/episode_return", "charts/collisions_per_episode", "losses/policy",
-              "losses/value", "losses/approx_kl", "losses/clipfrac", "charts/fps"}
+    wanted = {
+        "charts/success_rate",
+        "charts/episode_return",
+        "charts/collisions_per_episode",
+        "losses/policy",
+        "losses/value",
+        "losses/approx_kl",
+        "losses/clipfrac",
+        "charts/fps",
+    }
     assert wanted <= set(board), wanted - set(board)
     assert [step for step, _ in board["charts/success_rate"]] == [1, 2]
     # resume=true finds the finished state of the same config and has nothing left to do
     assert launch("train-ppo", [*TINY, "train_ppo.resume=true"]) == 0
-    second = [d for d in job_dirs(workdir) if d != run][0]
+    second = next(d for d in job_dirs(workdir) if d != run)
     assert len(pd.read_parquet(second / "learning_curves.parquet")) == 2
-    assert launch("eval", ["method=dgnn", f"method.checkpoint={run}/policy.pt", "eval.episodes=1",
-                           "scenario.time_limit=3"]) == 0
+    assert (
+        launch(
+            "eval", ["method=dgnn", f"method.checkpoint={run}/policy.pt", "eval.episodes=1", "scenario.time_limit=3"]
+        )
+        == 0
+    )
     result = CliRunner().invoke(app, ["plot", "training", str(run)])
     assert result.exit_code == 0 and "learning_curves.png" in result.output
 
@@ -141,18 +173,32 @@ def test_init_from_starts_at_the_loaded_weights_and_refuses_other_settings(tmp_p
     assert _same(trained, tuned)
     fresh, _ = _train(tmp_path / "c", iterations=1, lr=1e-30)
     assert not _same(trained, fresh)
-    with pytest.raises(StafpipeError, match="train_ppo.init_from.*hidden"):
-        ppo.train_ppo(TrainPPOConfig(init_from=str(saved), policy=PolicyConfig(hidden=8)), lambda rng, k: [], WorldConfig(),
-                      SensingConfig(), 0.3, 4, tmp_path / "d", "h", None, lambda h: None)
+    with pytest.raises(StafpipeError, match=r"train_ppo.init_from.*hidden"):
+        ppo.train_ppo(
+            TrainPPOConfig(init_from=str(saved), policy=PolicyConfig(hidden=8)),
+            lambda rng, k: [],
+            WorldConfig(),
+            SensingConfig(),
+            0.3,
+            4,
+            tmp_path / "d",
+            "h",
+            None,
+            lambda h: None,
+        )
 
 
 def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) -> None:
-    from stafpipe.learning.ppo import _teacher_samples
     from stafpipe.learning.adapters import ADAPTERS
     from stafpipe.learning.config import RewardConfig
+    from stafpipe.learning.ppo import _teacher_samples
 
-    tc = TrainPPOConfig(worlds=1, episode_steps=40, policy=PolicyConfig(hidden=16),
-                        imitation=ImitationConfig(epochs=1, teacher="avoiding", near_weight=5.0, noise=0.0))
+    tc = TrainPPOConfig(
+        worlds=1,
+        episode_steps=40,
+        policy=PolicyConfig(hidden=16),
+        imitation=ImitationConfig(epochs=1, teacher="avoiding", near_weight=5.0, noise=0.0),
+    )
     corridor = load_named_scenario("corridor")
     adapter = ADAPTERS["dgnn"](tc.policy, RewardConfig(), None, 2.0)
     drawn = [(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)]

@@ -13,8 +13,18 @@ BUILT_IN = sorted(p.stem for p in (conf_dir() / "scenario").glob("*.yaml"))
 
 
 def test_library_holds_the_issue_scenarios() -> None:
-    assert set(BUILT_IN) >= {"corridor", "bridge", "doorway", "narrowing", "multi_passage", "bollards", "forest",
-                             "zhu_moving_obstacle", "zhu_corridor16", "cezayirli_corridors"}
+    assert set(BUILT_IN) >= {
+        "corridor",
+        "bridge",
+        "doorway",
+        "narrowing",
+        "multi_passage",
+        "bollards",
+        "forest",
+        "zhu_moving_obstacle",
+        "zhu_corridor16",
+        "cezayirli_corridors",
+    }
 
 
 @pytest.mark.parametrize("name", BUILT_IN)
@@ -28,8 +38,18 @@ def test_every_built_in_scenario_builds_and_steps(name) -> None:
     assert (obs.obstacle_distance > -0.05).all()
 
 
-@pytest.mark.parametrize(("name", "width"), [("corridor", 2.4), ("bridge", 1.6), ("doorway", 1.5), ("bollards", 1.1),
-                                             ("narrowing", 2.0), ("multi_passage", 3.0), ("zhu_corridor16", 2.0)])
+@pytest.mark.parametrize(
+    ("name", "width"),
+    [
+        ("corridor", 2.4),
+        ("bridge", 1.6),
+        ("doorway", 1.5),
+        ("bollards", 1.1),
+        ("narrowing", 2.0),
+        ("multi_passage", 3.0),
+        ("zhu_corridor16", 2.0),
+    ],
+)
 def test_narrowest_passage_is_derived_from_geometry(name, width) -> None:
     sc = build_scenario(load_scenario_file(conf_dir() / "scenario" / f"{name}.yaml"))
     g = Geometry(sc)
@@ -91,13 +111,16 @@ def test_malformed_scenario_names_the_field(tmp_path, text) -> None:
     assert BAD[text] in str(err.value)
 
 
-@pytest.mark.parametrize(("text", "said"), [
-    ("", "is empty or not a mapping"),
-    ("- 1\n- 2\n", "is empty or not a mapping"),
-    ("name: x\nteam: {start: [1, 1], goal: [5, 5]}\n", "misses `world`"),
-    ("name: x\nworld: {xmin: 0, ymin: 0, xmax: 10, ymax: 10}\n", "misses `team.start`"),
-    ("world: {xmin: 0, ymin: 0, xmax: 10, ymax: 10}\nteam: {n: 4, start: [1, 1]}\n", "misses `team.goal`"),
-])
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ("", "is empty or not a mapping"),
+        ("- 1\n- 2\n", "is empty or not a mapping"),
+        ("name: x\nteam: {start: [1, 1], goal: [5, 5]}\n", "misses `world`"),
+        ("name: x\nworld: {xmin: 0, ymin: 0, xmax: 10, ymax: 10}\n", "misses `team.start`"),
+        ("world: {xmin: 0, ymin: 0, xmax: 10, ymax: 10}\nteam: {n: 4, start: [1, 1]}\n", "misses `team.goal`"),
+    ],
+)
 def test_a_scenario_file_takes_nothing_from_the_default_corridor(tmp_path, text, said) -> None:
     path = tmp_path / "part.yaml"
     path.write_text(text)

@@ -4,6 +4,7 @@ robot-frame features, the STAF tables, and the shipped policy on the corridor.""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -41,7 +42,10 @@ def _ideal_run(sc, divide, steps: int = 1500, plan_cfg: PlanConfig | None = None
     ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
     path = centred_path(sc, geometry, ctx.passage_width)
     t, v = sc.spec.team, sc.spec.robot.max_speed
-    pos, goal = place(sc.template(), t.start, math.radians(t.heading_deg)), place(sc.template(), t.goal, math.radians(t.heading_deg))
+    pos, goal = (
+        place(sc.template(), t.start, math.radians(t.heading_deg)),
+        place(sc.template(), t.goal, math.radians(t.heading_deg)),
+    )
     plan = StafPlan(plan_cfg or PlanConfig(), sc, sc.template(), goal, path, ctx.passage_width, divide)
     log = {"events": [], "min_gap": np.inf, "min_wall": np.inf, "labels": [], "progress": []}
     for k in range(steps):
@@ -64,8 +68,9 @@ def divide():
     return divider()
 
 
-@pytest.mark.parametrize("kind, m, balance", [("circle", 2, False), ("wedge", 3, False), ("line", 4, False),
-                                              ("line", 4, True)])
+@pytest.mark.parametrize(
+    "kind, m, balance", [("circle", 2, False), ("wedge", 3, False), ("line", 4, False), ("line", 4, True)]
+)
 def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m, balance) -> None:
     """m=auto with the geometric shrink (the comparison plan): targets alone keep robots apart and off the walls."""
     plan_cfg = PlanConfig(m="auto", adapt="geometric", balance=balance)
@@ -85,7 +90,7 @@ def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m, bala
         means = [log["progress"][k][labels == j].mean() for j in range(m)]
         if not 8.0 <= np.mean(means) <= 14.0:
             continue
-        assert all(a > b for a, b in zip(means[:-1], means[1:], strict=True))
+        assert all(a > b for a, b in itertools.pairwise(means))
 
 
 @pytest.mark.parametrize("kind", ["circle", "wedge"])
@@ -98,8 +103,15 @@ def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
     t = sc.spec.team
     pos = place(sc.template(), t.start, math.radians(t.heading_deg))
     goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
-    plan = StafPlan(PlanConfig(split_distance=100.0), sc, sc.template(), goal, centred_path(sc, geometry,
-                    ctx.passage_width), ctx.passage_width, divide)
+    plan = StafPlan(
+        PlanConfig(split_distance=100.0),
+        sc,
+        sc.template(),
+        goal,
+        centred_path(sc, geometry, ctx.passage_width),
+        ctx.passage_width,
+        divide,
+    )
     target = plan.step(pos, 0.1)
     assert len(plan.order) > 1
     # the targets slide from the robots into the new slots: no target jumps more than a step at top speed
@@ -121,8 +133,9 @@ def test_regroup_slides_targets_home_together(divide) -> None:
     t, v = sc.spec.team, sc.spec.robot.max_speed
     pos = place(sc.template(), t.start, math.radians(t.heading_deg))
     goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
-    plan = StafPlan(PlanConfig(), sc, sc.template(), goal, centred_path(sc, geometry, ctx.passage_width),
-                    ctx.passage_width, divide)
+    plan = StafPlan(
+        PlanConfig(), sc, sc.template(), goal, centred_path(sc, geometry, ctx.passage_width), ctx.passage_width, divide
+    )
     seen, previous = 0, None
     for _ in range(1500):
         target = plan.step(pos, 0.1).copy()
@@ -134,8 +147,9 @@ def test_regroup_slides_targets_home_together(divide) -> None:
             assert np.linalg.norm(target - previous, axis=1).max() <= 0.1 * v + 1e-9
             seen += 1
         previous = target
-        pos = pos + (target - pos) * np.minimum(1.0, 0.1 * v / np.maximum(np.linalg.norm(target - pos, axis=1,
-                                                                                          keepdims=True), 1e-9))
+        pos = pos + (target - pos) * np.minimum(
+            1.0, 0.1 * v / np.maximum(np.linalg.norm(target - pos, axis=1, keepdims=True), 1e-9)
+        )
         if np.linalg.norm(pos - plan.goal, axis=1).max() < 0.05:
             break
     assert seen > 10 and plan.home_frac.min() > 0.99
@@ -146,7 +160,7 @@ def test_plan_regroups_where_the_goal_area_is_close_to_the_narrow_part(divide, n
     """narrowing: the front subteam reaches the goal before the last one is out; multi_passage: two passages off
     each other's axis. Robots still inside keep following their subteam, the others take their goal slots."""
     sc = load_named_scenario(name)
-    tt, log, ctx = _ideal_run(sc, divide, plan_cfg=PlanConfig(m="auto", adapt="geometric"))
+    tt, log, _ctx = _ideal_run(sc, divide, plan_cfg=PlanConfig(m="auto", adapt="geometric"))
     assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
     assert log["min_wall"] > 0.05 and log["min_gap"] > 0.0
 
@@ -156,7 +170,7 @@ def test_default_plan_gives_two_subteams(divide, kind) -> None:
     """The paper's setup (STAF Table 1, Fig. 4): two subteams, each in the team's formation type, passing one after
     the other; the default (geometric) adaptation keeps every target off the walls, the nominal spacing does not."""
     sc = _scenario("corridor", kind)
-    tt, log, ctx = _ideal_run(sc, divide)
+    tt, log, _ctx = _ideal_run(sc, divide)
     assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
     split = next(k for k, lab in enumerate(log["labels"]) if lab.max() > 0)
     assert log["labels"][split].max() == 1  # two subteams
@@ -170,10 +184,10 @@ def test_default_plan_gives_two_subteams(divide, kind) -> None:
 def test_single_file_where_two_abreast_do_not_fit(divide) -> None:
     """Bollards 1.1 m apart: the plan turns each subteam into a column through a gap, so the targets alone pass the row
     without touching a bollard or each other."""
-    tt, log, ctx = _ideal_run(load_named_scenario("bollards"), divide)
+    tt, log, _ctx = _ideal_run(load_named_scenario("bollards"), divide)
     assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
     assert log["min_wall"] > 0.0 and log["min_gap"] > 0.0
-    off, log_off, _ = _ideal_run(load_named_scenario("bollards"), divide, plan_cfg=PlanConfig(single_file=False))
+    _off, log_off, _ = _ideal_run(load_named_scenario("bollards"), divide, plan_cfg=PlanConfig(single_file=False))
     assert log_off["min_wall"] < 0.0  # without the column, slots at the team's spacing hit the bollards
 
 
@@ -255,10 +269,28 @@ def test_subteam_metrics_and_staf_table() -> None:
     out = subteam_metrics(traj, ctx)
     assert out["sub1_sr"] == 1.0 and out["sub2_sr"] == 0.5  # robot 2 touched a wall
     assert out["sub1_tt"] == 2.0 and out["sub2_tt"] == 3.0
-    rows = [{"method": "staf", "formation": "circle", "n": 10, "drive": "holonomic", "scenario": "corridor",
-             "sr": 1.0 if k else 0.9, "tt": 30.0 + k, "cfi_0.5": 0.9, "cfi_0.1": 0.8, "cfi_0.01": 0.8,
-             "tt_ratio": 1.3, "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "eta": 2.17, "run": 0,
-             "paper_cell": True} for k in range(3)]
+    rows = [
+        {
+            "method": "staf",
+            "formation": "circle",
+            "n": 10,
+            "drive": "holonomic",
+            "scenario": "corridor",
+            "sr": 1.0 if k else 0.9,
+            "tt": 30.0 + k,
+            "cfi_0.5": 0.9,
+            "cfi_0.1": 0.8,
+            "cfi_0.01": 0.8,
+            "tt_ratio": 1.3,
+            "collisions": 0.0,
+            "sub1_sr": 1.0,
+            "sub1_tt": 25.0,
+            "eta": 2.17,
+            "run": 0,
+            "paper_cell": True,
+        }
+        for k in range(3)
+    ]
     narrower = [dict(r, eta=1.8, run=1, paper_cell=False) for r in rows]  # a corridor with a 2.0 m gap: its own row
     table = summary_table(pd.DataFrame(rows + narrower))
     assert len(table) == 2 and table.loc[0, "episodes"] == 3 and math.isclose(table.loc[0, "sr"], 29 / 30)
@@ -274,7 +306,6 @@ def test_shipped_staf_passes_the_corridor_and_logs_split_and_regroup(workdir) ->
     """The shipped policy end to end (method=staf through eval): every robot at its goal slot without a collision,
     the team split into subteams and regrouped, and the MCAP log says so."""
     from conftest import job_dirs
-
     from stafpipe.episode_log import read_episode
     from stafpipe.launch import launch
 
@@ -290,16 +321,34 @@ def test_shipped_staf_passes_the_corridor_and_logs_split_and_regroup(workdir) ->
 
 def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir) -> None:
     from conftest import job_dirs
-
     from stafpipe.launch import launch
 
     for method in ("staf", "lf"):
         d = workdir / method
         d.mkdir()
-        pd.DataFrame([{"method": method, "formation": "line", "n": 10, "drive": "holonomic", "scenario": "corridor",
-                       "sr": 1.0, "tt": 30.0, "cfi_0.5": 0.8, "cfi_0.1": 0.7, "cfi_0.01": 0.7, "tt_ratio": 1.4,
-                       "collisions": 0.0, "sub1_sr": 1.0, "sub1_tt": 25.0, "sub1_cfi_0.5": 0.9, "eta": 2.17}] * 2
-                     ).to_parquet(d / "results.parquet")
+        pd.DataFrame(
+            [
+                {
+                    "method": method,
+                    "formation": "line",
+                    "n": 10,
+                    "drive": "holonomic",
+                    "scenario": "corridor",
+                    "sr": 1.0,
+                    "tt": 30.0,
+                    "cfi_0.5": 0.8,
+                    "cfi_0.1": 0.7,
+                    "cfi_0.01": 0.7,
+                    "tt_ratio": 1.4,
+                    "collisions": 0.0,
+                    "sub1_sr": 1.0,
+                    "sub1_tt": 25.0,
+                    "sub1_cfi_0.5": 0.9,
+                    "eta": 2.17,
+                }
+            ]
+            * 2
+        ).to_parquet(d / "results.parquet")
     # staf's run is on the paper's map, lf's on the corridor made 10 m long: no paper numbers beside it
     walls = OmegaConf.to_container(OmegaConf.load(conf_dir() / "scenario" / "corridor.yaml"))
     OmegaConf.save({"scenario": walls}, workdir / "staf" / "config.yaml")

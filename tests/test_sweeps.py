@@ -16,8 +16,11 @@ def _configs(root):
     )
 
 
-@pytest.mark.parametrize("launcher", [[], pytest.param(["hydra/launcher=local", "hydra.launcher.n_jobs=2"],
-                                                        marks=pytest.mark.slow)], ids=["basic", "joblib"])
+@pytest.mark.parametrize(
+    "launcher",
+    [[], pytest.param(["hydra/launcher=local", "hydra.launcher.n_jobs=2"], marks=pytest.mark.slow)],
+    ids=["basic", "joblib"],
+)
 def test_two_by_two_multirun_gives_four_jobs(workdir, launcher) -> None:
     code = launch("generate", ["-m", *launcher, "formation=circle,wedge", "seed=1,2", *SMALL])
     assert code == 0

@@ -55,7 +55,7 @@ def test_train_high_stage_writes_checkpoint_losses_and_curves(workdir) -> None:
     [run] = job_dirs(workdir)
     losses = pd.read_parquet(run / "losses.parquet")
     assert list(losses.epoch) == [1, 2] and {"train_adjacency", "val_balance", "val_goal"} <= set(losses.columns)
-    model, made_by = load_checkpoint(run / "high_level.pt")
+    _model, made_by = load_checkpoint(run / "high_level.pt")
     assert made_by["seed"] == 2 and made_by["train_high"]["epochs"] == 2 and made_by["teams"] == 48
     assert (run / "loss_curves.png").stat().st_size > 0
     board = tensorboard_scalars(run)

@@ -11,9 +11,17 @@ import numpy as np
 import pytest
 
 from stafpipe.controllers.zhu import ZhuConfig, ZhuController, ZhuFault
-from stafpipe.controllers.zhu_decisions import (StuckDetector, comm_components, intersection_graph, merge_candidate,
-                                                merge_requests, mutual_merges, needs_split, spectral_partition,
-                                                split_team)
+from stafpipe.controllers.zhu_decisions import (
+    StuckDetector,
+    comm_components,
+    intersection_graph,
+    merge_candidate,
+    merge_requests,
+    mutual_merges,
+    needs_split,
+    spectral_partition,
+    split_team,
+)
 from stafpipe.convex_region import fit_centres, grow_halfplanes, intersect_all, regions_from_halfplanes
 from stafpipe.episode import run_episode
 from stafpipe.errors import ConfigError
@@ -23,7 +31,7 @@ from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
 
 
-def _box(x0: float, y0: float, x1: float, y1: float):  # noqa: ANN202
+def _box(x0: float, y0: float, x1: float, y1: float):
     return np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]), np.array([x1, -x0, y1, -y0])
 
 
@@ -35,22 +43,25 @@ def test_regions_areas_and_intersections_have_known_values() -> None:
     (none,) = intersect_all([[a, *regions_from_halfplanes([_box(2, 2, 3, 3)])]])
     assert none.empty and none.area == 0.0
     # redundant half-planes are dropped: the region keeps its four edges only
-    (r,) = regions_from_halfplanes([(np.concatenate([_box(0, 0, 1, 1)[0], [[1.0, 0.0]]]),
-                                     np.concatenate([_box(0, 0, 1, 1)[1], [5.0]]))])
+    (r,) = regions_from_halfplanes(
+        [(np.concatenate([_box(0, 0, 1, 1)[0], [[1.0, 0.0]]]), np.concatenate([_box(0, 0, 1, 1)[1], [5.0]]))]
+    )
     assert len(r.offsets) == 4
 
 
 def test_grown_region_stays_clear_of_an_obstacle_and_within_sight() -> None:
     # a wall x = 2 (a capsule of radius 0.1) and a robot of radius 0.2 at the origin, visibility 6
-    (rows,) = grow_halfplanes(np.zeros((1, 2)), np.array([[2.0, -10.0]]), np.array([[2.0, 10.0]]), np.array([0.1]),
-                              6.0, 0.2)
+    (rows,) = grow_halfplanes(
+        np.zeros((1, 2)), np.array([[2.0, -10.0]]), np.array([[2.0, 10.0]]), np.array([0.1]), 6.0, 0.2
+    )
     (region,) = regions_from_halfplanes([rows])
     assert region.vertices[:, 0].max() == pytest.approx(2.0 - 0.1 - 0.2)
     assert np.linalg.norm(region.vertices, axis=1).max() <= 6.0 + 1e-9
     assert region.contains(np.zeros((1, 2)))[0]
     # no obstacle: the visibility octagon, 2 sqrt(2) r^2
-    (free,) = regions_from_halfplanes(grow_halfplanes(np.zeros((1, 2)), np.zeros((0, 2)), np.zeros((0, 2)),
-                                                      np.zeros(0), 6.0, 0.2))
+    (free,) = regions_from_halfplanes(
+        grow_halfplanes(np.zeros((1, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), 6.0, 0.2)
+    )
     assert free.area == pytest.approx(2 * math.sqrt(2) * 36.0)
 
 
@@ -125,17 +136,22 @@ def test_stuck_detector_flags_only_a_robot_that_makes_no_progress() -> None:
 
 
 def _open_lane(n: int = 4) -> ScenarioConfig:
-    return ScenarioConfig(name="lane", world=WorldBounds(0, -6, 40, 6), obstacles=[],
-                          team=TeamSpec(n=n, formation="square", spacing=1.0, start=(3.0, 0.0), goal=(30.0, 0.0),
-                                        heading_deg=0.0), time_limit=60.0)
+    return ScenarioConfig(
+        name="lane",
+        world=WorldBounds(0, -6, 40, 6),
+        obstacles=[],
+        team=TeamSpec(n=n, formation="square", spacing=1.0, start=(3.0, 0.0), goal=(30.0, 0.0), heading_deg=0.0),
+        time_limit=60.0,
+    )
 
 
 def _events(faults: list[ZhuFault]) -> tuple[list[tuple[str, list[int]]], dict[str, float]]:
     """Run an open-lane episode with `faults`; the events it decided (without the region snapshots) and its metrics."""
     scenario = build_scenario(_open_lane())
     controller = ZhuController(ZhuConfig(faults=faults))
-    values = run_episode(scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(),
-                         SensingConfig(radius=3.0))
+    values = run_episode(
+        scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig(radius=3.0)
+    )
     return [(e.kind, e.robots) for e in controller.drain_events() if e.kind != "regions"], values
 
 
@@ -143,7 +159,7 @@ def test_a_stuck_robot_is_flagged_exactly_left_behind_and_merges_back_after_reco
     kinds, values = _events([ZhuFault(robot=1, kind="stuck", start=3.0, end=8.0)])
     assert ("stuck", [1]) in kinds
     assert all(r == [1] for k, r in kinds if k == "stuck")  # nobody else is flagged
-    assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("stuck", [1])):]  # it rejoins after the fault
+    assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("stuck", [1])) :]  # it rejoins after the fault
     assert values["sr"] == 1.0
 
 
@@ -151,21 +167,27 @@ def test_a_silent_robot_is_dropped_and_rejoins_when_it_talks_again() -> None:
     kinds, values = _events([ZhuFault(robot=2, kind="comm", start=3.0, end=8.0)])
     assert ("comm_loss", [2]) in kinds
     assert all(r == [2] for k, r in kinds if k == "comm_loss")
-    assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("comm_loss", [2])):]
+    assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("comm_loss", [2])) :]
     assert values["sr"] == 1.0
 
 
 def test_a_corridor_too_narrow_for_the_square_splits_the_team_and_it_merges_after() -> None:
     # two walls leave a 1.6 m gap at x in [14, 18]: the 1 m square (1.4 m wide with its radius) fits only with 0.1 m
     # to spare on each side, which the regions grown at the corners do not leave
-    spec = dataclasses.replace(_open_lane(), obstacles=[{"box": {"center": [16.0, 3.8], "size": [4.0, 6.0]}},
-                                                        {"box": {"center": [16.0, -3.8], "size": [4.0, 6.0]}}])
+    spec = dataclasses.replace(
+        _open_lane(),
+        obstacles=[
+            {"box": {"center": [16.0, 3.8], "size": [4.0, 6.0]}},
+            {"box": {"center": [16.0, -3.8], "size": [4.0, 6.0]}},
+        ],
+    )
     scenario = build_scenario(spec)
     controller = ZhuController(ZhuConfig())
-    values = run_episode(scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(),
-                         SensingConfig(radius=3.0))
+    values = run_episode(
+        scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig(radius=3.0)
+    )
     kinds = [e.kind for e in controller.drain_events()]
-    assert "split" in kinds and "merge" in kinds[kinds.index("split"):]
+    assert "split" in kinds and "merge" in kinds[kinds.index("split") :]
     assert values["obstacle_collisions"] == 0
     assert values["sr"] == 1.0
     assert "regions" in kinds  # the common regions are logged for the snapshots plot
@@ -174,8 +196,9 @@ def test_a_corridor_too_narrow_for_the_square_splits_the_team_and_it_merges_afte
 def test_timings_per_part_are_reported() -> None:
     scenario = build_scenario(_open_lane())
     controller = ZhuController(ZhuConfig())
-    run_episode(scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(),
-                SensingConfig(radius=3.0))
+    run_episode(
+        scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig(radius=3.0)
+    )
     stats = controller.episode_stats()
     assert stats["time_convex_regions_count"] > 10 and stats["time_convex_regions_mean"] > 0
     assert stats["time_convex_regions_min"] <= stats["time_convex_regions_mean"] <= stats["time_convex_regions_max"]
@@ -183,14 +206,17 @@ def test_timings_per_part_are_reported() -> None:
     json.dumps(stats)
 
 
-@pytest.mark.parametrize(("field", "value", "needle"), [
-    ("visibility", -1.0, "visibility"),
-    ("v_min", 500.0, "larger than any region"),
-    ("p_max", 0.0, "p_max"),
-    ("scales", [1.5], "scales"),
-    ("faults", [ZhuFault(kind="fire")], "faults[0].kind"),
-    ("faults", [ZhuFault(start=5.0, end=2.0)], "faults[0]"),
-])
+@pytest.mark.parametrize(
+    ("field", "value", "needle"),
+    [
+        ("visibility", -1.0, "visibility"),
+        ("v_min", 500.0, "larger than any region"),
+        ("p_max", 0.0, "p_max"),
+        ("scales", [1.5], "scales"),
+        ("faults", [ZhuFault(kind="fire")], "faults[0].kind"),
+        ("faults", [ZhuFault(start=5.0, end=2.0)], "faults[0]"),
+    ],
+)
 def test_bad_settings_are_refused_with_the_key(field: str, value: object, needle: str) -> None:
     with pytest.raises(ConfigError, match=needle.replace("[", r"\[").replace("]", r"\]")):
         ZhuController(dataclasses.replace(ZhuConfig(), **{field: value}))
@@ -202,5 +228,13 @@ def test_a_fault_on_a_robot_that_does_not_exist_is_refused() -> None:
     scenario = build_scenario(_open_lane())
     controller = ZhuController(ZhuConfig(faults=[ZhuFault(robot=7)]))
     with pytest.raises(ConfigError, match=r"faults\[0\].robot"):
-        controller.reset(TeamInfo(scenario, np.zeros((4, 2)), np.zeros((4, 2)), scenario.template(),
-                                  np.array([[3.0, 0.0], [30.0, 0.0]]), 10.0))
+        controller.reset(
+            TeamInfo(
+                scenario,
+                np.zeros((4, 2)),
+                np.zeros((4, 2)),
+                scenario.template(),
+                np.array([[3.0, 0.0], [30.0, 0.0]]),
+                10.0,
+            )
+        )

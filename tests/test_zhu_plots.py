@@ -6,16 +6,20 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+from conftest import job_dirs
 from stafpipe.cli import app
 from stafpipe.launch import launch
 from stafpipe.plots.zhu import TIMED_PARTS, timing_table
 
-from conftest import job_dirs
 
-
-def _zhu_run(workdir):  # noqa: ANN001, ANN202
-    assert launch("eval", ["method=zhu", "scenario=corridor", "scenario.time_limit=5", "eval.episodes=2",
-                           "sensing.radius=3.0"]) == 0
+def _zhu_run(workdir):
+    assert (
+        launch(
+            "eval",
+            ["method=zhu", "scenario=corridor", "scenario.time_limit=5", "eval.episodes=2", "sensing.radius=3.0"],
+        )
+        == 0
+    )
     [run] = job_dirs(workdir / "outputs" / "eval")
     return run
 

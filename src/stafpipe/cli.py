@@ -17,18 +17,28 @@ app = typer.Typer(
 _HYDRA_ARGS = {"allow_extra_args": True, "ignore_unknown_options": True}
 GROUPS = ("method", "scenario", "formation", "robot", "experiment")
 EXAMPLES = {
-    "generate": ["stafpipe generate formation=wedge seed=3 data.instances=5000",
-                 "stafpipe generate -m formation=circle,wedge,line seed=1,2"],
-    "generate-maps": ["stafpipe generate-maps seed=7 maps.count=20",
-                      "stafpipe generate-maps maps.count=5 'maps.drives=[diff_drive]'"],
+    "generate": [
+        "stafpipe generate formation=wedge seed=3 data.instances=5000",
+        "stafpipe generate -m formation=circle,wedge,line seed=1,2",
+    ],
+    "generate-maps": [
+        "stafpipe generate-maps seed=7 maps.count=20",
+        "stafpipe generate-maps maps.count=5 'maps.drives=[diff_drive]'",
+    ],
     "train-high": ["stafpipe train-high experiment=smoke", "stafpipe train-high seed=2 'data.mix=[wedge,line]'"],
-    "train-ppo": ["stafpipe train-ppo train_ppo.method=dgnn train_ppo.iterations=50",
-                  "stafpipe train-ppo experiment=staf_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'"],
-    "eval": ["stafpipe eval method=staf scenario=bridge formation=wedge eval.episodes=20",
-             "stafpipe eval -m hydra/launcher=local method=staf,dgnn,lf scenario=corridor"],
+    "train-ppo": [
+        "stafpipe train-ppo train_ppo.method=dgnn train_ppo.iterations=50",
+        "stafpipe train-ppo experiment=staf_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'",
+    ],
+    "eval": [
+        "stafpipe eval method=staf scenario=bridge formation=wedge eval.episodes=20",
+        "stafpipe eval -m hydra/launcher=local method=staf,dgnn,lf scenario=corridor",
+    ],
     "ablate": ["stafpipe ablate ablate.study=subteam_count", "stafpipe ablate ablate.study=noise seed=2"],
-    "plot": ["stafpipe plot trajectories outputs/eval/DATE/TIME",
-             "stafpipe plot table plot.run_dirs='[outputs/eval/A,outputs/eval/B]'"],
+    "plot": [
+        "stafpipe plot trajectories outputs/eval/DATE/TIME",
+        "stafpipe plot table plot.run_dirs='[outputs/eval/A,outputs/eval/B]'",
+    ],
 }
 
 
@@ -37,9 +47,15 @@ def _overrides_help() -> str:
     group directories are listed once per process, not once per stage)."""
     from stafpipe.paths import conf_dir
 
-    lines = ["\b", "Trailing words are Hydra overrides: key=value (e.g. eval.episodes=20), group=option (below),",
-             "-m to sweep comma-separated values, --cfg job to print the composed config and run nothing.",
-             "A misspelled key or option is refused with a did-you-mean (exit code 2).", "", "\b", "Config groups:"]
+    lines = [
+        "\b",
+        "Trailing words are Hydra overrides: key=value (e.g. eval.episodes=20), group=option (below),",
+        "-m to sweep comma-separated values, --cfg job to print the composed config and run nothing.",
+        "A misspelled key or option is refused with a did-you-mean (exit code 2).",
+        "",
+        "\b",
+        "Config groups:",
+    ]
     for group in GROUPS:
         options = sorted(p.stem for p in (conf_dir() / group).glob("*.yaml") if not p.stem.startswith("base"))
         lines.append(f"  {group}: {', '.join(options)}")
@@ -68,7 +84,8 @@ def generate(ctx: typer.Context) -> None:
 
 @app.command("generate-maps", context_settings=_HYDRA_ARGS, epilog=_epilog("generate-maps"))
 def generate_maps(ctx: typer.Context) -> None:
-    """Generate seeded procedural training maps (corridors, doorways, bends, gaps, bollards, fields) as scenario YAMLs."""
+    """Generate seeded procedural training maps (corridors, doorways, bends, gaps, bollards, fields) as scenario
+    YAMLs."""
     _stage("generate-maps", ctx.args)
 
 
@@ -100,9 +117,11 @@ def ablate(ctx: typer.Context) -> None:
 def plot(
     ctx: typer.Context,
     kind: str = typer.Argument(
-        None, help="What to draw: trajectories (eval run), partitions (ablate run), training (train-ppo/-high run), "
+        None,
+        help="What to draw: trajectories (eval run), partitions (ablate run), training (train-ppo/-high run), "
         "connectivity (Cezayirli eval run), regions (Zhu eval run), timing (Zhu runs: Table I), table (STAF Tables 1-2 "
-        "from plot.run_dirs=[...])."),
+        "from plot.run_dirs=[...]).",
+    ),
     run_dir: str = typer.Argument(None, help="The run directory to draw from (e.g. an eval run)."),
 ) -> None:
     """Draw figures from a run directory, e.g. `stafpipe plot trajectories outputs/eval/DATE/TIME`."""
@@ -111,7 +130,7 @@ def plot(
     positional = [a for a in given if "=" not in a and not a.startswith("-")]
     overrides = [a for a in given if a not in positional]
     keys = ["plot.kind", "plot.run_dir"]
-    _stage("plot", [f"{k}={_quote(v)}" for k, v in zip(keys, positional)] + overrides + ctx.args)
+    _stage("plot", [f"{k}={_quote(v)}" for k, v in zip(keys, positional, strict=False)] + overrides + ctx.args)
 
 
 def _quote(value: str) -> str:
@@ -119,13 +138,28 @@ def _quote(value: str) -> str:
     return value if all(c.isalnum() or c in "/._-~" for c in value) else "'" + value.replace("'", "\\'") + "'"
 
 
+def _fs_fault_exit(exc: OSError) -> None:
+    """A file-system fault (disk full, read-only, no permission) as one line and exit 2; anything else re-raised."""
+    from stafpipe.launch import fs_fault
+
+    fault = fs_fault(exc)
+    if fault is None:
+        raise exc
+    typer.echo(f"error: {fault}", err=True)
+    raise typer.Exit(2) from None
+
+
 @app.command()
 def run(
     pipeline: str = typer.Argument(..., help="A name in pipelines/ (e.g. smoke) or a path to a pipeline YAML."),
     force: bool = typer.Option(False, "--force", help="Run every step, even those already done for the same config."),
-    config_dir: list[str] = typer.Option([], "--config-dir", help="Your own config directory (e.g. with scenario/"
-                                         "my_map.yaml): its groups and options join the shipped ones for every step; "
-                                         "may be given several times."),
+    config_dir: list[str] = typer.Option(
+        [],
+        "--config-dir",
+        help="Your own config directory (e.g. with scenario/"
+        "my_map.yaml): its groups and options join the shipped ones for every step; "
+        "may be given several times.",
+    ),
 ) -> None:
     """Run a pipeline: its stages in order, skipping those already done for the same resolved config."""
     from stafpipe.pipeline import run_pipeline
@@ -137,6 +171,8 @@ def run(
     except StafpipeError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
+    except OSError as exc:
+        _fs_fault_exit(exc)
     raise typer.Exit(code)
 
 
@@ -144,7 +180,8 @@ def run(
 def inspect(
     file: str = typer.Argument(..., help="An episode's MCAP file."),
     recover: bool = typer.Option(
-        False, "--recover", help="Write FILE.recovered.mcap with every intact chunk's records (a partial episode)."),
+        False, "--recover", help="Write FILE.recovered.mcap with every intact chunk's records (a partial episode)."
+    ),
 ) -> None:
     """Summarise an episode's MCAP log and recompute its metrics from the log alone."""
     from stafpipe.episode_log import recover as recover_log
@@ -161,6 +198,8 @@ def inspect(
     except StafpipeError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
+    except OSError as exc:
+        _fs_fault_exit(exc)
     typer.echo(report)
     if not equal:
         raise typer.Exit(1)
@@ -168,9 +207,12 @@ def inspect(
 
 @app.command()
 def export(
-    network: str = typer.Argument(..., help="staf (STAF's GNN + low level), dgnn (the DGNN policy) or high (STAF's "
-                                  "deep graph cut)."),
-    checkpoint: str = typer.Option("", "--checkpoint", help="A policy.pt / high-level checkpoint; empty: the shipped one."),
+    network: str = typer.Argument(
+        ..., help="staf (STAF's GNN + low level), dgnn (the DGNN policy) or high (STAF's deep graph cut)."
+    ),
+    checkpoint: str = typer.Option(
+        "", "--checkpoint", help="A policy.pt / high-level checkpoint; empty: the shipped one."
+    ),
     output: str = typer.Option("", "--output", help="The ONNX file to write; empty: outputs/export/NETWORK.onnx."),
 ) -> None:
     """Write a learned network as ONNX for a robot (inputs, outputs and frames: docs/export.md)."""
@@ -183,7 +225,11 @@ def export(
     except StafpipeError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
+    except OSError as exc:
+        _fs_fault_exit(exc)
     except ModuleNotFoundError as exc:
-        typer.echo(f"error: export needs the onnx extra ({exc.name} is missing): pip install 'stafpipe[onnx]'", err=True)
+        typer.echo(
+            f"error: export needs the onnx extra ({exc.name} is missing): pip install 'stafpipe[onnx]'", err=True
+        )
         raise typer.Exit(2) from None
     typer.echo(f"wrote {path}")

@@ -8,7 +8,8 @@ space of robot centres: obstacles are dilated by the robot radius first (Zhu's O
 Growing (2D, one IRIS step with a point seed; see docs/zhu.md for why no ellipsoid iterations): start from the
 visibility disc B_i (a regular polygon inscribed in radius r_B, 8 sides by default: 90 % of the disc's area);
 repeatedly take the remaining obstacle nearest to the seed, add the half-plane tangent to its dilated surface at the
-point closest to the seed, and drop every obstacle that lies wholly beyond the new half-plane. Moving obstacles enter as capsules swept over the horizon tau (the projection of
+point closest to the seed, and drop every obstacle that lies wholly beyond the new half-plane. Moving obstacles enter
+as capsules swept over the horizon tau (the projection of
 Zhu's position-time obstacle (1) onto the plane).
 
 Polygons are computed from half-planes by enumerating the crossings of every pair of lines that satisfy all
@@ -64,8 +65,9 @@ def _pairs(m: int) -> tuple[np.ndarray, np.ndarray]:
     return np.triu_indices(m, 1)
 
 
-def polygons(normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-7, area_only: bool = False
-             ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+def polygons(
+    normals: np.ndarray, offsets: np.ndarray, tol: float = 1e-7, area_only: bool = False
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """B convex polygons {x : normals[b] @ x <= offsets[b]}: normals (B, m, 2), offsets (B, m); padding rows are
     normals 0, offsets 1. Every vertex is the crossing of two lines that satisfies all constraints, enumerated for all
     B at once. Returns the vertices (counter-clockwise, (k, 2) each), the areas (B,), and which rows are edges (B, m);
@@ -123,8 +125,12 @@ def regions_from_halfplanes(rows: list[tuple[np.ndarray, np.ndarray]]) -> list[R
     redundant half-planes dropped, so later intersections stay small)."""
     normals, offsets = _padded(rows)
     vertices, area, edges = polygons(normals, offsets)
-    return [Region(normals[b][edges[b]], offsets[b][edges[b]], v, float(area[b])) if len(v) >= 3
-            else Region(*_EMPTY, v[:0], 0.0) for b, v in enumerate(vertices)]
+    return [
+        Region(normals[b][edges[b]], offsets[b][edges[b]], v, float(area[b]))
+        if len(v) >= 3
+        else Region(*_EMPTY, v[:0], 0.0)
+        for b, v in enumerate(vertices)
+    ]
 
 
 def halfplanes_of(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -146,9 +152,17 @@ def _disc(radius: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     return halfplanes_of(disc_polygon(np.zeros(2), radius, sides))
 
 
-def grow_halfplanes(seeds: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, seg_r: np.ndarray, visibility: float,
-                    inflate: float, ahead: np.ndarray | None = None, behind: float = math.inf, sides: int = 8
-                    ) -> list[tuple[np.ndarray, np.ndarray]]:
+def grow_halfplanes(
+    seeds: np.ndarray,
+    seg_a: np.ndarray,
+    seg_b: np.ndarray,
+    seg_r: np.ndarray,
+    visibility: float,
+    inflate: float,
+    ahead: np.ndarray | None = None,
+    behind: float = math.inf,
+    sides: int = 8,
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Half-planes of each robot's obstacle-free convex region P_i (Zhu Section II) around its seed (P, 2) within
     `visibility` (r_B; the disc as a regular polygon of `sides`), avoiding capsules (seg_a, seg_b, seg_r) dilated by
     `inflate` (the robot radius). With unit directions `ahead` (P, 2), each region also stops `behind` metres behind
@@ -162,7 +176,8 @@ def grow_halfplanes(seeds: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, seg
     for i, seed in enumerate(seeds):
         rows_n, rows_c = [disc_n], [disc_c + disc_n @ seed]
         if ahead is not None and math.isfinite(behind):
-            rows_n.append(-ahead[i][None]), rows_c.append(np.array([behind - float(ahead[i] @ seed)]))
+            rows_n.append(-ahead[i][None])
+            rows_c.append(np.array([behind - float(ahead[i] @ seed)]))
         cp, dist = cps[i], dists[i]
         gap = dist - reach
         remaining = gap < visibility  # Zhu's O_i = B_i ∩ O: only what the robot sees
@@ -173,7 +188,8 @@ def grow_halfplanes(seeds: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, seg
             # tangent to the dilated obstacle at its point nearest the seed; inside an obstacle (a contact), the
             # half-plane passes through the seed so the region stays on the free side
             c = float(n @ cp[k] - reach[k]) if gap[k] > 0 else float(n @ seed)
-            rows_n.append(n[None]), rows_c.append(np.array([c]))
+            rows_n.append(n[None])
+            rows_c.append(np.array([c]))
             remaining &= np.minimum(seg_a @ n, seg_b @ n) - reach < c - _EPS  # drop what lies wholly beyond
         out.append((np.concatenate(rows_n), np.concatenate(rows_c)))
     return out
@@ -246,8 +262,10 @@ def fit_centres(region: Region, hulls: list[np.ndarray], target: np.ndarray) -> 
     det = nrm[i, 0] * nrm[j, 1] - nrm[i, 1] * nrm[j, 0]
     ok = np.abs(det) > 1e-12
     i, j, det = i[ok], j[ok], det[ok]
-    cross = np.stack([(off[:, i] * nrm[j, 1] - off[:, j] * nrm[i, 1]) / det,
-                      (nrm[i, 0] * off[:, j] - nrm[j, 0] * off[:, i]) / det], axis=-1)  # (B, P, 2)
+    cross = np.stack(
+        [(off[:, i] * nrm[j, 1] - off[:, j] * nrm[i, 1]) / det, (nrm[i, 0] * off[:, j] - nrm[j, 0] * off[:, i]) / det],
+        axis=-1,
+    )  # (B, P, 2)
     proj = target - ((nrm @ target)[None] - off)[..., None] * nrm[None]  # (B, m, 2), normals are unit
     cand = np.concatenate([np.broadcast_to(target, (len(hulls), 1, 2)), proj, cross], axis=1)
     feasible = (cand @ nrm.T <= off[:, None, :] + 1e-7).all(axis=-1)

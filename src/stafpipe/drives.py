@@ -18,7 +18,9 @@ def limit_norm(v: np.ndarray, limit: float) -> np.ndarray:
     return v * np.minimum(1.0, limit / np.maximum(norm, 1e-12))
 
 
-def holonomic(cmd: np.ndarray, vel: np.ndarray, heading: np.ndarray, robot: RobotSpec, dt: float) -> tuple[np.ndarray, np.ndarray]:
+def holonomic(
+    cmd: np.ndarray, vel: np.ndarray, heading: np.ndarray, robot: RobotSpec, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
     """New velocity (.., 2) and heading (..): speed capped at max_speed, change capped at max_accel * dt."""
     target = limit_norm(cmd, robot.max_speed)
     new = vel + limit_norm(target - vel, robot.max_accel * dt)
@@ -26,7 +28,9 @@ def holonomic(cmd: np.ndarray, vel: np.ndarray, heading: np.ndarray, robot: Robo
     return new, np.where(moving, np.arctan2(new[..., 1], new[..., 0]), heading)
 
 
-def diff_drive(cmd: np.ndarray, vel: np.ndarray, heading: np.ndarray, robot: RobotSpec, dt: float) -> tuple[np.ndarray, np.ndarray]:
+def diff_drive(
+    cmd: np.ndarray, vel: np.ndarray, heading: np.ndarray, robot: RobotSpec, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Unicycle tracking of the commanded velocity: turn towards it at most max_turn_rate, drive forward at the
     command's speed scaled by cos(heading error) (no reversing), acceleration bounded."""
     target = limit_norm(cmd, robot.max_speed)

@@ -6,6 +6,7 @@ trajectory from an MCAP log so that `stafpipe inspect` recomputes exactly the me
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import asdict
 from pathlib import Path
 
@@ -14,9 +15,9 @@ from omegaconf import OmegaConf
 
 from stafpipe.controllers import Controller, TeamInfo
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
-from stafpipe.geometry import Geometry, closest_points, capsule_arrays, path_length
+from stafpipe.geometry import Geometry, capsule_arrays, closest_points, path_length
 from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance
-from stafpipe.scenario import Scenario, ScenarioConfig, build_scenario
+from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds
 
@@ -43,7 +44,7 @@ def team_path(scenario: Scenario, geometry: Geometry, clearance: float | None = 
     TeamInfo.path."""
     route = _route(scenario)
     keep = scenario.spec.robot.radius if clearance is None else clearance
-    legs = [geometry.shortest_path(a, b, keep) for a, b in zip(route[:-1], route[1:], strict=True)]
+    legs = [geometry.shortest_path(a, b, keep) for a, b in itertools.pairwise(route)]
     return np.concatenate([legs[0], *[leg[1:] for leg in legs[1:]]])
 
 
@@ -60,19 +61,33 @@ def centred_path(scenario: Scenario, geometry: Geometry, passage_width: float) -
     return team_path(scenario, geometry)
 
 
-def episode_context(scenario: Scenario, geometry: Geometry, sensing: SensingConfig, goal_tolerance: float,
-                    cfi_margin: float) -> tuple[MetricContext, np.ndarray]:
+def episode_context(
+    scenario: Scenario, geometry: Geometry, sensing: SensingConfig, goal_tolerance: float, cfi_margin: float
+) -> tuple[MetricContext, np.ndarray]:
     """Metric context (eta and the travel-time lower bound from geometry) and the centre's shortest path."""
     t, r = scenario.spec.team, scenario.spec.robot
     route = _route(scenario)
-    path = team_path(scenario, geometry)
-    eta = min(geometry.passage_width(a, b) for a, b in zip(route[:-1], route[1:], strict=True))
+    try:
+        path = team_path(scenario, geometry)
+    except ValueError:
+        raise ScenarioError(
+            f"team.goal {list(t.goal)}: no way there from team.start {list(t.start)} for a robot of radius {r.radius} "
+            "(walls or obstacles close the map between them)"
+        ) from None
+    eta = min(geometry.passage_width(a, b) for a, b in itertools.pairwise(route))
     per_robot = float(np.linalg.norm(np.subtract(t.goal, t.start)))  # every slot moves by the centre's displacement
     lower_bound = max(path_length(path), per_robot) / r.max_speed
     ctx = MetricContext(
-        robot_radius=r.radius, formation=t.formation, spacing=t.spacing, angle_deg=t.angle_deg,
-        heading_deg=t.heading_deg, passage_width=eta, travel_time_lower_bound=lower_bound,
-        goal_tolerance=goal_tolerance, sensing_radius=sensing.radius, cfi_margin=cfi_margin,
+        robot_radius=r.radius,
+        formation=t.formation,
+        spacing=t.spacing,
+        angle_deg=t.angle_deg,
+        heading_deg=t.heading_deg,
+        passage_width=eta,
+        travel_time_lower_bound=lower_bound,
+        goal_tolerance=goal_tolerance,
+        sensing_radius=sensing.radius,
+        cfi_margin=cfi_margin,
     )
     return ctx, path
 
@@ -96,21 +111,35 @@ def trajectory_from_record(rec: EpisodeRecord, scenario: Scenario) -> Trajectory
     """The trajectory an MCAP log describes."""
     collisions = [(e["step"], e["robots"][0], e["robots"][1]) for e in rec.events if e["kind"] == "collision"]
     return Trajectory(
-        time=rec.time, positions=rec.positions, velocities=rec.velocities, subteams=rec.subteams,
-        team_goal=rec.goal, obstacle_distance=obstacle_distances(scenario, rec.positions, rec.movers),
+        time=rec.time,
+        positions=rec.positions,
+        velocities=rec.velocities,
+        subteams=rec.subteams,
+        team_goal=rec.goal,
+        obstacle_distance=obstacle_distances(scenario, rec.positions, rec.movers),
         collisions=collisions,
     )
 
 
-def run_episode(scenario: Scenario, geometry: Geometry, controller: Controller, method: str, seed: int,
-                world_cfg: WorldConfig, sensing: SensingConfig, goal_tolerance: float = 0.3,
-                cfi_margin: float = 0.1, log_path: Path | None = None) -> dict[str, float]:
+def run_episode(
+    scenario: Scenario,
+    geometry: Geometry,
+    controller: Controller,
+    method: str,
+    seed: int,
+    world_cfg: WorldConfig,
+    sensing: SensingConfig,
+    goal_tolerance: float = 0.3,
+    cfi_margin: float = 0.1,
+    log_path: Path | None = None,
+) -> dict[str, float]:
     """Run one episode; log it to `log_path` (MCAP) if given; return its metrics."""
     ctx, path = episode_context(scenario, geometry, sensing, goal_tolerance, cfi_margin)
     worlds = Worlds([scenario], sensing, world_cfg)
     obs = worlds.reset([seed]).world(0)
-    controller.reset(TeamInfo(scenario, obs.position.copy(), worlds.goal[0].copy(), scenario.template(), path,
-                              ctx.passage_width))
+    controller.reset(
+        TeamInfo(scenario, obs.position.copy(), worlds.goal[0].copy(), scenario.template(), path, ctx.passage_width)
+    )
     log = EpisodeLogWriter(log_path) if log_path else None
     if log:
         log.info(method, seed, scenario_yaml(scenario), asdict(ctx), worlds.goal[0])
@@ -118,8 +147,10 @@ def run_episode(scenario: Scenario, geometry: Geometry, controller: Controller, 
 
     def record(step: int) -> None:
         times.append(float(worlds.time[0]))
-        pos.append(worlds.pos[0].copy()), vel.append(worlds.vel[0].copy())
-        sub.append(controller.subteams.copy()), movers.append(worlds.mover_positions(0))
+        pos.append(worlds.pos[0].copy())
+        vel.append(worlds.vel[0].copy())
+        sub.append(controller.subteams.copy())
+        movers.append(worlds.mover_positions(0))
         if log:
             log.state(times[-1], pos[-1], vel[-1], worlds.heading[0], controller.targets, sub[-1], movers[-1])
             for e in controller.drain_events():
@@ -140,8 +171,15 @@ def run_episode(scenario: Scenario, geometry: Geometry, controller: Controller, 
             break
     p = np.stack(pos)
     mv = np.stack(movers)
-    traj = Trajectory(np.array(times), p, np.stack(vel), np.stack(sub), worlds.goal[0].copy(),
-                      obstacle_distances(scenario, p, mv), collisions)
+    traj = Trajectory(
+        np.array(times),
+        p,
+        np.stack(vel),
+        np.stack(sub),
+        worlds.goal[0].copy(),
+        obstacle_distances(scenario, p, mv),
+        collisions,
+    )
     values = episode_metrics(traj, ctx)
     if log:
         log.metrics(times[-1], values)

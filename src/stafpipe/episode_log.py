@@ -16,8 +16,8 @@ from typing import Any, BinaryIO
 
 import numpy as np
 from mcap.exceptions import McapError
-from mcap.writer import Writer as RawWriter
 from mcap.reader import make_reader
+from mcap.writer import Writer as RawWriter
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer
 
@@ -66,23 +66,56 @@ class EpisodeLogWriter:
 
     def info(self, method: str, seed: int, scenario_yaml: str, context: dict[str, Any], goal: np.ndarray) -> None:
         """The episode's header: scenario, metric context, team goal."""
-        self._write("/episode", {"method": method, "seed": seed, "scenario_yaml": scenario_yaml,
-                                 "context_json": json.dumps(context), "goal_x": goal[:, 0].tolist(),
-                                 "goal_y": goal[:, 1].tolist()}, 0.0)
+        self._write(
+            "/episode",
+            {
+                "method": method,
+                "seed": seed,
+                "scenario_yaml": scenario_yaml,
+                "context_json": json.dumps(context),
+                "goal_x": goal[:, 0].tolist(),
+                "goal_y": goal[:, 1].tolist(),
+            },
+            0.0,
+        )
 
-    def state(self, t: float, pos: np.ndarray, vel: np.ndarray, heading: np.ndarray, targets: np.ndarray,
-              subteams: np.ndarray, movers: np.ndarray) -> None:
+    def state(
+        self,
+        t: float,
+        pos: np.ndarray,
+        vel: np.ndarray,
+        heading: np.ndarray,
+        targets: np.ndarray,
+        subteams: np.ndarray,
+        movers: np.ndarray,
+    ) -> None:
         """One control step."""
-        poses = [{"position": {"x": float(p[0]), "y": float(p[1]), "z": 0.0},
-                  "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(h / 2), "w": math.cos(h / 2)}}
-                 for p, h in zip(pos, heading, strict=True)]
+        poses = [
+            {
+                "position": {"x": float(p[0]), "y": float(p[1]), "z": 0.0},
+                "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(h / 2), "w": math.cos(h / 2)},
+            }
+            for p, h in zip(pos, heading, strict=True)
+        ]
         self._write("/robots/poses", {"header": {"stamp": _stamp(t), "frame_id": "map"}, "poses": poses}, t)
-        self._write("/robots/state", {
-            "stamp": _stamp(t), "time": t, "x": pos[:, 0].tolist(), "y": pos[:, 1].tolist(),
-            "vx": vel[:, 0].tolist(), "vy": vel[:, 1].tolist(), "heading": heading.tolist(),
-            "target_x": targets[:, 0].tolist(), "target_y": targets[:, 1].tolist(),
-            "subteam": subteams.astype(int).tolist(), "mover_x": movers[:, 0].tolist(), "mover_y": movers[:, 1].tolist(),
-        }, t)
+        self._write(
+            "/robots/state",
+            {
+                "stamp": _stamp(t),
+                "time": t,
+                "x": pos[:, 0].tolist(),
+                "y": pos[:, 1].tolist(),
+                "vx": vel[:, 0].tolist(),
+                "vy": vel[:, 1].tolist(),
+                "heading": heading.tolist(),
+                "target_x": targets[:, 0].tolist(),
+                "target_y": targets[:, 1].tolist(),
+                "subteam": subteams.astype(int).tolist(),
+                "mover_x": movers[:, 0].tolist(),
+                "mover_y": movers[:, 1].tolist(),
+            },
+            t,
+        )
 
     def event(self, t: float, step: int, kind: str, robots: list[int], detail: str = "") -> None:
         """A split, merge, fault or collision."""
@@ -131,8 +164,9 @@ def read_episode(path: str | Path) -> EpisodeRecord:
     """Read an episode log; a clear LogError if it is missing, damaged or not ours."""
     path = Path(path)
     if not path.is_file():
-        raise LogError(f"{path}: no such file")
-    info, states, events, metrics, topics, recovered = None, [], [], None, {}, None
+        raise LogError(f"{path}: " + ("a directory, not an episode log" if Path(path).is_dir() else "no such file"))
+    info, states, events, metrics, recovered = None, [], [], None, None
+    topics: dict[str, int] = {}
     try:
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
@@ -147,23 +181,41 @@ def read_episode(path: str | Path) -> EpisodeRecord:
                 elif topic == "/robots/state":
                     states.append(msg)
                 elif topic == "/events":
-                    events.append({"time": msg.time, "step": msg.step, "kind": msg.kind, "robots": list(msg.robots),
-                                   "detail": msg.detail})
+                    events.append(
+                        {
+                            "time": msg.time,
+                            "step": msg.step,
+                            "kind": msg.kind,
+                            "robots": list(msg.robots),
+                            "detail": msg.detail,
+                        }
+                    )
                 elif topic == "/metrics":
                     metrics = json.loads(msg.json)
     except (McapError, ValueError, KeyError, EOFError, OSError) as exc:
-        raise LogError(f"{path}: not a readable MCAP episode log ({type(exc).__name__}: {exc}); "
-                       "try `stafpipe inspect --recover`") from None
+        raise LogError(
+            f"{path}: not a readable MCAP episode log ({type(exc).__name__}: {exc}); try `stafpipe inspect --recover`"
+        ) from None
     if info is None or not states:
         raise LogError(f"{path}: not a stafpipe episode log (no /episode or /robots/state messages)")
     arr = lambda *keys: np.stack([np.stack([np.asarray(getattr(s, k), float) for k in keys], -1) for s in states])  # noqa: E731
     return EpisodeRecord(
-        method=info.method, seed=int(info.seed), scenario_yaml=info.scenario_yaml,
-        context=json.loads(info.context_json), goal=np.stack([info.goal_x, info.goal_y], -1),
-        time=np.array([s.time for s in states]), positions=arr("x", "y"), velocities=arr("vx", "vy"),
-        headings=np.stack([np.asarray(s.heading, float) for s in states]), targets=arr("target_x", "target_y"),
-        subteams=np.stack([np.asarray(s.subteam, int) for s in states]), movers=arr("mover_x", "mover_y"),
-        events=events, metrics=metrics, topics=topics, recovered=recovered,
+        method=info.method,
+        seed=int(info.seed),
+        scenario_yaml=info.scenario_yaml,
+        context=json.loads(info.context_json),
+        goal=np.stack([info.goal_x, info.goal_y], -1),
+        time=np.array([s.time for s in states]),
+        positions=arr("x", "y"),
+        velocities=arr("vx", "vy"),
+        headings=np.stack([np.asarray(s.heading, float) for s in states]),
+        targets=arr("target_x", "target_y"),
+        subteams=np.stack([np.asarray(s.subteam, int) for s in states]),
+        movers=arr("mover_x", "mover_y"),
+        events=events,
+        metrics=metrics,
+        topics=topics,
+        recovered=recovered,
     )
 
 
@@ -173,7 +225,7 @@ def recover(src: str | Path, dst: str | Path) -> tuple[int, int, list[Damage]]:
     damage, so that it reads as a partial episode. Returns (messages kept, channels, the damage found)."""
     src = Path(src)
     if not src.is_file():
-        raise LogError(f"{src}: no such file")
+        raise LogError(f"{src}: " + ("a directory, not an episode log" if Path(src).is_dir() else "no such file"))
     data = src.read_bytes()
     scan = intact_records(data)
     damage = check(data, scan)
@@ -186,14 +238,27 @@ def recover(src: str | Path, dst: str | Path) -> tuple[int, int, list[Damage]]:
         with open(tmp, "wb") as out:
             writer = RawWriter(out, chunk_size=CHUNK_SIZE, enable_crcs=True, enable_data_crcs=True)
             writer.start(profile="ros2", library="stafpipe recover")
-            schema_ids = {old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
-                          for old, s in scan.schemas.items()}
-            channel_ids = {old: writer.register_channel(topic=c.topic, message_encoding=c.message_encoding,
-                                                        schema_id=schema_ids.get(c.schema_id, 0), metadata=c.metadata)
-                           for old, c in scan.channels.items()}
+            schema_ids = {
+                old: writer.register_schema(name=s.name, encoding=s.encoding, data=s.data)
+                for old, s in scan.schemas.items()
+            }
+            channel_ids = {
+                old: writer.register_channel(
+                    topic=c.topic,
+                    message_encoding=c.message_encoding,
+                    schema_id=schema_ids.get(c.schema_id, 0),
+                    metadata=c.metadata,
+                )
+                for old, c in scan.channels.items()
+            }
             for m in messages:
-                writer.add_message(channel_id=channel_ids[m.channel_id], log_time=m.log_time, data=m.data,
-                                   publish_time=m.publish_time, sequence=m.sequence)
+                writer.add_message(
+                    channel_id=channel_ids[m.channel_id],
+                    log_time=m.log_time,
+                    data=m.data,
+                    publish_time=m.publish_time,
+                    sequence=m.sequence,
+                )
             writer.add_metadata(RECOVERED, {"source": src.name, "damage": "; ".join(map(str, damage)) or "none"})
             writer.finish()
         os.replace(tmp, dst)

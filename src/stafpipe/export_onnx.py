@@ -19,6 +19,7 @@ import json
 import logging
 import warnings
 from pathlib import Path
+from typing import Any
 
 import torch
 from torch import nn
@@ -26,6 +27,7 @@ from torch import nn
 from stafpipe.errors import StafpipeError
 from stafpipe.highlevel.model import DeepGraphCut
 from stafpipe.io import atomic_write
+from stafpipe.learning.policy_net import PolicyNet
 
 log = logging.getLogger(__name__)
 NETWORKS = ("staf", "dgnn", "high")
@@ -35,7 +37,7 @@ OPSET = 18
 class PolicyMean(nn.Module):
     """The execution part of a learned policy: action means (n, 2) of one team."""
 
-    def __init__(self, policy: nn.Module):
+    def __init__(self, policy: PolicyNet):
         super().__init__()
         self.policy = policy
 
@@ -55,7 +57,8 @@ class DenseGraphCut(nn.Module):
         cfg, model = self.model.cfg, self.model
         n = x.shape[0]
         h = model.w_v(x)
-        for k, layer in enumerate(model.layers):
+        layers: list[Any] = list(model.layers)  # AttentionLayer modules
+        for k, layer in enumerate(layers):
             wa = layer.w_a(h).view(n, cfg.heads, cfg.hidden)
             s_i = (wa * layer.a[:, : cfg.hidden]).sum(-1).T  # (H, n)
             s_j = (wa * layer.a[:, cfg.hidden :]).sum(-1).T
@@ -67,7 +70,7 @@ class DenseGraphCut(nn.Module):
             alpha = e / e.sum(-1, keepdim=True).clamp_min(1e-30)
             wh = layer.w_h(h).view(n, cfg.heads, cfg.hidden).transpose(0, 1)  # (H, n, W)
             h = (wh + alpha @ wh).mean(0)
-            if k + 1 < len(model.layers):
+            if k + 1 < len(layers):
                 h = torch.relu(h)
         slots = torch.arange(cfg.m_max)
         one_hot = (slots == m - 1).to(x.dtype).expand(n, cfg.m_max)
@@ -75,21 +78,27 @@ class DenseGraphCut(nn.Module):
         return torch.softmax(logits.masked_fill(slots[None, :] >= m, -torch.inf), dim=1)
 
 
-def example_inputs(network: str, module: nn.Module, n: int = 5) -> dict[str, torch.Tensor]:
+def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Tensor]:
     """Inputs of the right shapes and types for `network` (random values; a team of n robots)."""
     gen = torch.Generator().manual_seed(0)
     if network == "high":
         cfg = module.model.cfg
         adjacency = torch.rand(n, n, generator=gen) < 0.6
         adjacency = (adjacency | adjacency.T) & ~torch.eye(n, dtype=torch.bool)
-        return {"x": torch.randn(n, 2 * len(cfg.features), generator=gen), "adjacency": adjacency,
-                "m": torch.tensor(min(2, cfg.m_max), dtype=torch.int64)}
+        return {
+            "x": torch.randn(n, 2 * len(cfg.features), generator=gen),
+            "adjacency": adjacency,
+            "m": torch.tensor(min(2, cfg.m_max), dtype=torch.int64),
+        }
     from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
 
     own, edge = (STAF_OWN, STAF_EDGE) if network == "staf" else (OWN, EDGE)
     mask = (torch.rand(n, n, generator=gen) < 0.6) & ~torch.eye(n, dtype=torch.bool)
-    return {"own": torch.randn(n, own, generator=gen), "edge": torch.randn(n, n, edge, generator=gen) * mask[..., None],
-            "mask": mask}
+    return {
+        "own": torch.randn(n, own, generator=gen),
+        "edge": torch.randn(n, n, edge, generator=gen) * mask[..., None],
+        "mask": mask,
+    }
 
 
 def load_network(network: str, checkpoint: str = "") -> tuple[nn.Module, dict]:
@@ -114,8 +123,16 @@ def export(network: str, checkpoint: str, out: Path) -> Path:
     module, made_by = load_network(network, checkpoint)
     inputs = example_inputs(network, module)
     robots = torch.export.Dim("robots", min=2, max=4096)
-    shapes = {name: ({0: robots} if value.dim() == 2 and name in ("own", "x") else
-                     {0: robots, 1: robots} if value.dim() >= 2 else {}) for name, value in inputs.items()}
+    shapes = {
+        name: (
+            {0: robots}
+            if value.dim() == 2 and name in ("own", "x")
+            else {0: robots, 1: robots}
+            if value.dim() >= 2
+            else {}
+        )
+        for name, value in inputs.items()
+    }
     output = "assignment" if network == "high" else "action"
 
     def write(tmp: Path) -> None:
@@ -125,14 +142,25 @@ def export(network: str, checkpoint: str, out: Path) -> Path:
         try:  # the exporter's progress lines, notes on axis names and deprecations: not ours to show
             with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
                 warnings.simplefilter("ignore")
-                program = torch.onnx.export(module, tuple(inputs.values()), dynamo=True, input_names=list(inputs),
-                                            output_names=[output], dynamic_shapes=shapes, opset_version=OPSET,
-                                            verbose=False)
+                program = torch.onnx.export(
+                    module,
+                    tuple(inputs.values()),
+                    dynamo=True,
+                    input_names=list(inputs),
+                    output_names=[output],
+                    dynamic_shapes=shapes,
+                    opset_version=OPSET,
+                    verbose=False,
+                )
         finally:
             quiet.setLevel(level)
+        assert program is not None  # dynamo=True returns the program
         model = program.model_proto
-        meta = {"stafpipe.network": network, "stafpipe.checkpoint": checkpoint or "shipped",
-                "stafpipe.made_by": json.dumps(made_by, sort_keys=True, default=str)}
+        meta = {
+            "stafpipe.network": network,
+            "stafpipe.checkpoint": checkpoint or "shipped",
+            "stafpipe.made_by": json.dumps(made_by, sort_keys=True, default=str),
+        }
         for key, value in meta.items():
             entry = model.metadata_props.add()
             entry.key, entry.value = key, value

@@ -101,7 +101,7 @@ class Geometry:
         """Shortest path (K, 2) from start to goal keeping `clearance` from obstacles (16-neighbour grid Dijkstra,
         then shortened along lines of sight). Raises ValueError if the goal cannot be reached. Remembered per
         (start, goal, clearance): every episode of an eval asks for the same legs."""
-        key = (tuple(map(float, start)), tuple(map(float, goal)), float(clearance))
+        key = ((float(start[0]), float(start[1])), (float(goal[0]), float(goal[1])), float(clearance))
         if key not in self._paths:
             self._paths[key] = self._shortest_path(start, goal, clearance)
         return self._paths[key].copy()
@@ -117,7 +117,8 @@ class Geometry:
             j0, j1 = max(0, -dj), w - max(0, dj)
             a, b = idx[i0:i1, j0:j1], idx[i0 + di : i1 + di, j0 + dj : j1 + dj]
             ok = free[i0:i1, j0:j1] & free[i0 + di : i1 + di, j0 + dj : j1 + dj]
-            rows.append(a[ok]), cols.append(b[ok])
+            rows.append(a[ok])
+            cols.append(b[ok])
             costs.append(np.full(int(ok.sum()), math.hypot(di, dj) * self.resolution))
         graph = coo_matrix((np.concatenate(costs), (np.concatenate(rows), np.concatenate(cols))), shape=(h * w, h * w))
         s, g = self._cell(start), self._cell(goal)

@@ -28,15 +28,18 @@ def describe(path: str) -> tuple[str, bool]:
     (any CRC, magic or record length that does not hold: mcap_check.check) is an error naming the first damage."""
     file = Path(path)
     if not file.is_file():
-        raise LogError(f"{path}: no such file")
+        raise LogError(f"{path}: " + ("a directory, not an episode log" if Path(path).is_dir() else "no such file"))
     damage = check(file.read_bytes())
     if damage:
         more = f" and {len(damage) - 1} more" if len(damage) > 1 else ""
         raise LogError(f"{path}: damaged at {damage[0]}{more}; `stafpipe inspect --recover` keeps every intact chunk")
     rec = read_episode(path)
     recomputed = recompute_metrics(rec)
-    lines = [f"{path}", f"  method {rec.method}, seed {rec.seed}, {rec.positions.shape[1]} robots, "
-             f"{len(rec.time)} steps, {rec.time[-1]:.1f} s"]
+    lines = [
+        f"{path}",
+        f"  method {rec.method}, seed {rec.seed}, {rec.positions.shape[1]} robots, "
+        f"{len(rec.time)} steps, {rec.time[-1]:.1f} s",
+    ]
     lines.append("  channels: " + ", ".join(f"{t} ({n})" for t, n in sorted(rec.topics.items())))
     changes = [0] + [k for k in range(1, len(rec.time)) if not np.array_equal(rec.subteams[k], rec.subteams[k - 1])]
     lines.append("  subteams over time:")
@@ -51,12 +54,18 @@ def describe(path: str) -> tuple[str, bool]:
     equal = all(_same(recomputed[k], float(logged.get(k, math.nan))) for k in recomputed) if logged else True
     if rec.recovered is not None:
         lines.insert(1, f"  PARTIAL episode, recovered from a damaged log ({rec.recovered})")
-    verdict = ("not compared with the logged ones" if rec.recovered is not None
-               else "no logged metrics to compare" if not logged
-               else "equal to the logged ones" if equal else "DIFFERENT from the logged ones")
+    verdict = (
+        "not compared with the logged ones"
+        if rec.recovered is not None
+        else "no logged metrics to compare"
+        if not logged
+        else "equal to the logged ones"
+        if equal
+        else "DIFFERENT from the logged ones"
+    )
     partial = "of the recovered part only, " if rec.recovered is not None else ""
     lines.append(f"  metrics ({partial}recomputed from the log; {verdict}):")
-    for k, v in recomputed.items():
-        mark = "" if not logged or _same(v, float(logged.get(k, math.nan))) else f"   (logged {logged.get(k)})"
-        lines.append(f"    {k:22s} {v:12.4f}{mark}")
+    for name, v in recomputed.items():
+        mark = "" if not logged or _same(v, float(logged.get(name, math.nan))) else f"   (logged {logged.get(name)})"
+        lines.append(f"    {name:22s} {v:12.4f}{mark}")
     return "\n".join(lines), equal

@@ -27,7 +27,9 @@ def circle_integrity(p: np.ndarray) -> float:
     c = p - p.mean(axis=0)
     ring = p[np.argsort(np.arctan2(c[:, 1], c[:, 0]))]
     prev, nxt = np.roll(ring, 1, axis=0) - ring, np.roll(ring, -1, axis=0) - ring
-    cos = np.einsum("ij,ij->i", prev, nxt) / np.maximum(np.linalg.norm(prev, axis=1) * np.linalg.norm(nxt, axis=1), 1e-12)
+    cos = np.einsum("ij,ij->i", prev, nxt) / np.maximum(
+        np.linalg.norm(prev, axis=1) * np.linalg.norm(nxt, axis=1), 1e-12
+    )
     theta = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     ideal = (n - 2) * 180.0 / n
     return _clip(1.0 - float(np.mean(np.abs(theta - ideal))) / ideal)
@@ -55,7 +57,9 @@ def _v_scores(p: np.ndarray, headings: np.ndarray, apex_deg: float) -> np.ndarra
     l_l, l_r, l_b = np.hypot(lx - ax, ly - ay), np.hypot(rx - ax, ry - ay), np.hypot(lx - rx, ly - ry)
     l_m = np.hypot((lx + rx) / 2.0 - ax, (ly + ry) / 2.0 - ay)
     ideal_m = l_b / 2.0 / math.tan(half)
-    score = 1.0 - 2.0 * np.abs(l_l - l_r) / np.maximum(l_l + l_r, 1e-12) - np.abs(l_m - ideal_m) / np.maximum(ideal_m, 1e-9)
+    score = (
+        1.0 - 2.0 * np.abs(l_l - l_r) / np.maximum(l_l + l_r, 1e-12) - np.abs(l_m - ideal_m) / np.maximum(ideal_m, 1e-9)
+    )
     return np.where(left.any(axis=1) & right.any(axis=1), np.clip(score, 0.0, 1.0), 0.0)
 
 
@@ -106,7 +110,7 @@ def line_integrity(p: np.ndarray) -> float:
     ideal = np.linalg.norm(ordered[-1] - ordered[0]) / (n - 1)
     if ideal < 1e-9:
         return 0.0
-    return _clip(1.0 - float(np.mean(np.abs(gaps - ideal))) / ideal)
+    return _clip(1.0 - float(np.mean(np.abs(gaps - ideal))) / float(ideal))
 
 
 def shape_integrity(p: np.ndarray, kind: str, spacing: float, heading: float, angle_deg: float = 90.0) -> float:

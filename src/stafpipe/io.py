@@ -13,7 +13,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 
-def atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
+def atomic_write(path: Path, write: Callable[[Path], object]) -> Path:
     """Call `write(tmp)` on a temporary sibling of `path`, then rename it into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -45,8 +45,9 @@ def write_table(df: pd.DataFrame, stem: Path, metadata: dict[str, str] | None = 
     return [parquet, csv]
 
 
-def markdown_table(df, digits: int = 3) -> str:  # noqa: ANN001 (a pandas DataFrame)
+def markdown_table(df, digits: int = 3) -> str:
     """A DataFrame as a GitHub Markdown table, floats rounded to `digits`."""
+
     def cell(v: object) -> str:
         return f"{v:.{digits}f}" if isinstance(v, float) else str(v)
 
@@ -55,7 +56,9 @@ def markdown_table(df, digits: int = 3) -> str:  # noqa: ANN001 (a pandas DataFr
     return "\n".join(lines) + "\n"
 
 
-def save_figure(fig, stem: Path, formats: Sequence[str] = ("png", "pdf"), dpi: int = 130) -> list[Path]:  # noqa: ANN001
+def save_figure(fig, stem: Path, formats: Sequence[str] = ("png", "pdf"), dpi: int = 130) -> list[Path]:
     """A matplotlib Figure as `stem.<format>` for each format, each written atomically."""
-    return [atomic_write(stem.with_name(f"{stem.name}.{fmt}"), lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=dpi))
-            for fmt in formats]
+    return [
+        atomic_write(stem.with_name(f"{stem.name}.{fmt}"), lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=dpi))  # type: ignore[misc]
+        for fmt in formats
+    ]

@@ -7,6 +7,8 @@ pipelines use to skip finished work.
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import importlib
 import logging
@@ -92,7 +94,7 @@ def inputs_hash(cfg: DictConfig) -> str:
     return digest.hexdigest()
 
 
-def _digest_path(path: Path, digest: "hashlib._Hash") -> None:
+def _digest_path(path: Path, digest: hashlib._Hash) -> None:
     files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
     for f in files:
         stat = f.stat()
@@ -112,21 +114,62 @@ def _detach_file_logs(out_dir: Path) -> None:
     """Close and remove the log file handlers Hydra attached for a run in `out_dir`: a later log call in the same
     process would otherwise reopen a file in a deleted directory."""
     for logger in [logging.getLogger(), *logging.Logger.manager.loggerDict.values()]:
-        for handler in list(getattr(logger, "handlers", [])):
-            if isinstance(handler, logging.FileHandler) and Path(handler.baseFilename).is_relative_to(out_dir.resolve()):
+        if not isinstance(logger, logging.Logger):
+            continue
+        for handler in list(logger.handlers):
+            if isinstance(handler, logging.FileHandler) and Path(handler.baseFilename).is_relative_to(
+                out_dir.resolve()
+            ):
                 logger.removeHandler(handler)
                 handler.close()
 
 
+FS_FAULTS = {
+    errno.ENOSPC: "no space left on the device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+}
+"""File-system faults reported in one line (the path and the cause) instead of a traceback."""
+UNFINISHED = "the run did not finish (no stage.json); its unfinished files were removed"
+
+
+def fs_fault(exc: BaseException | None, where: Path | None = None) -> str | None:
+    """One line for a file-system fault anywhere in `exc`'s chain (disk full, read-only, no permission), or None."""
+    while exc is not None:
+        if isinstance(exc, OSError) and exc.errno in FS_FAULTS:
+            path = exc.filename or (f"writing into {where}" if where else "writing the run's outputs")
+            return f"{path}: {FS_FAULTS[exc.errno]}"
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+def _remove_partials(out_dir: Path) -> None:
+    """Files a failed run was still writing: episode logs (`*.part`) and atomic writes' temporaries (`.*.tmp-*`)."""
+    if out_dir.is_dir():
+        for p in [*out_dir.rglob("*.part"), *out_dir.rglob(".*.tmp-*")]:
+            with contextlib.suppress(OSError):
+                p.unlink()
+
+
+def _only_hydra_files(out_dir: Path) -> bool:
+    """Nothing but Hydra's own files (`.hydra/`, logs) and empty folders."""
+    for p in out_dir.iterdir():
+        if p.name == ".hydra" or p.suffix == ".log":
+            continue
+        if not p.is_dir() or any(q.is_file() for q in p.rglob("*")):
+            return False
+    return True
+
+
 def _discard_if_empty(out_dir: Path) -> None:
     # A run that failed before writing any result leaves no directory behind: only Hydra's own files are in it.
-    if out_dir.is_dir() and all(p.name == ".hydra" or p.suffix == ".log" for p in out_dir.iterdir()):
+    if out_dir.is_dir() and _only_hydra_files(out_dir):
         _detach_file_logs(out_dir)
         shutil.rmtree(out_dir, ignore_errors=True)
-        try:  # and its date folder, if this run was the only one in it
+        with contextlib.suppress(OSError):  # and its date folder, if this run was the only one in it
             out_dir.parent.rmdir()
-        except OSError:
-            pass
 
 
 def stage_task(cfg: DictConfig) -> None:
@@ -147,15 +190,29 @@ def stage_task(cfg: DictConfig) -> None:
             raise  # the launcher reports it for this job of the sweep
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
-    except BaseException:
+    except BaseException as exc:
+        _remove_partials(out_dir)
         if lock.held:
-            lock.release()
+            with contextlib.suppress(OSError):
+                lock.release()
             _discard_if_empty(out_dir)
-        raise
+        fault = fs_fault(exc, out_dir)
+        if fault is None or HydraConfig.get().mode == RunMode.MULTIRUN:
+            raise
+        print(f"error: {fault}; {UNFINISHED}", file=sys.stderr)
+        sys.exit(2)
     try:
         _finish(cfg, out_dir, outputs, inputs, started)
+    except OSError as exc:
+        _remove_partials(out_dir)
+        fault = fs_fault(exc, out_dir)
+        if fault is None:
+            raise
+        print(f"error: {fault}; {UNFINISHED}", file=sys.stderr)
+        sys.exit(2)
     finally:
-        lock.release()
+        with contextlib.suppress(OSError):
+            lock.release()
 
 
 def _finish(cfg: DictConfig, out_dir: Path, outputs: list[Path], inputs: str, started: float) -> None:
@@ -187,9 +244,11 @@ def _config_problem(stage: str, overrides: Sequence[str]) -> str | None:
 
     try:
         for job in jobs_to_check(overrides) or []:
-            compose_config(stage, job)
+            check_run_config(compose_config(stage, job))
     except (HydraException, OmegaConfBaseException) as exc:
         return explain(exc, stage, list(overrides))
+    except StafpipeError as exc:
+        return str(exc)
     finally:
         GlobalHydra.instance().clear()
     return None
@@ -203,6 +262,7 @@ def launch(stage: str, overrides: Sequence[str]) -> int:
     from stafpipe.config.compose_errors import explain
 
     register_configs()
+    logging.raiseExceptions = False  # a log file on a full disk must not print tracebacks over the one-line error
     if any(o in ("-m", "--multirun") for o in overrides):
         problem = _config_problem(stage, overrides)  # every value of the sweep, before its first job runs
         if problem:
@@ -223,6 +283,12 @@ def launch(stage: str, overrides: Sequence[str]) -> int:
         return 2
     except StafpipeError as exc:  # a job of a sweep (stage_task re-raises in multirun mode)
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # Hydra could not make the run directory (read-only, full), or a sweep job's fault
+        fault = fs_fault(exc)
+        if fault is None:
+            raise
+        print(f"error: {fault}", file=sys.stderr)
         return 2
     finally:
         sys.argv = saved_argv

@@ -50,19 +50,39 @@ class MapsConfig:
 
     def check(self, key: str = "maps") -> None:
         require(self.count >= 1, f"{key}.count", "must be >= 1", self.count)
-        require(len(self.families) > 0 and all(f in FAMILIES for f in self.families), f"{key}.families",
-                f"must be a non-empty list of {list(FAMILIES)}", self.families)
+        require(
+            len(self.families) > 0 and all(f in FAMILIES for f in self.families),
+            f"{key}.families",
+            f"must be a non-empty list of {list(FAMILIES)}",
+            self.families,
+        )
         for name, low in (("width", 0.5), ("length", 0.2)):
             lo_hi = list(getattr(self, name))
-            require(len(lo_hi) == 2 and low <= lo_hi[0] <= lo_hi[1], f"{key}.{name}",
-                    f"must be [low, high] with {low} <= low <= high", lo_hi)
+            require(
+                len(lo_hi) == 2 and low <= lo_hi[0] <= lo_hi[1],
+                f"{key}.{name}",
+                f"must be [low, high] with {low} <= low <= high",
+                lo_hi,
+            )
         sizes = list(self.team_sizes)
-        require(len(sizes) == 2 and 2 <= sizes[0] <= sizes[1] <= 16, f"{key}.team_sizes",
-                "must be [low, high] with 2 <= low <= high <= 16", sizes)
-        require(len(self.formations) > 0 and all(f in FORMATION_TYPES for f in self.formations), f"{key}.formations",
-                f"must be a non-empty list of {list(FORMATION_TYPES)}", self.formations)
-        require(len(self.drives) > 0 and all(d in DRIVE_KINDS for d in self.drives), f"{key}.drives",
-                f"must be a non-empty list of {list(DRIVE_KINDS)}", self.drives)
+        require(
+            len(sizes) == 2 and 2 <= sizes[0] <= sizes[1] <= 16,
+            f"{key}.team_sizes",
+            "must be [low, high] with 2 <= low <= high <= 16",
+            sizes,
+        )
+        require(
+            len(self.formations) > 0 and all(f in FORMATION_TYPES for f in self.formations),
+            f"{key}.formations",
+            f"must be a non-empty list of {list(FORMATION_TYPES)}",
+            self.formations,
+        )
+        require(
+            len(self.drives) > 0 and all(d in DRIVE_KINDS for d in self.drives),
+            f"{key}.drives",
+            f"must be a non-empty list of {list(DRIVE_KINDS)}",
+            self.drives,
+        )
         require(0.4 < self.spacing <= 3.0, f"{key}.spacing", "must be in (0.4, 3]", self.spacing)
 
 
@@ -82,8 +102,7 @@ def _r(x: float, digits: int = 3) -> float:
 
 
 def _box(x0: float, x1: float, y0: float, y1: float) -> dict:
-    return {"box": {"center": [_r((x0 + x1) / 2, 3), _r((y0 + y1) / 2, 3)],
-                    "size": [_r(x1 - x0, 3), _r(y1 - y0, 3)]}}
+    return {"box": {"center": [_r((x0 + x1) / 2, 3), _r((y0 + y1) / 2, 3)], "size": [_r(x1 - x0, 3), _r(y1 - y0, 3)]}}
 
 
 def _walls_around(x0: float, x1: float, y_lo: float, y_hi: float, height: float) -> list[dict]:
@@ -147,8 +166,11 @@ def _gaps(rng, cfg: MapsConfig, lay: _Layout) -> list[dict]:
     for c in centres:
         edges += [c - w / 2, c + w / 2]
     edges.append(lay.height)
-    return [_box(x0, x0 + thick, edges[2 * i], edges[2 * i + 1]) for i in range(k + 1)
-            if edges[2 * i + 1] - edges[2 * i] > 0.05]
+    return [
+        _box(x0, x0 + thick, edges[2 * i], edges[2 * i + 1])
+        for i in range(k + 1)
+        if edges[2 * i + 1] - edges[2 * i] > 0.05
+    ]
 
 
 def _bollards(rng, cfg: MapsConfig, lay: _Layout) -> list[dict]:
@@ -180,8 +202,15 @@ def _field(rng, cfg: MapsConfig, lay: _Layout) -> list[dict]:
                     out.append({"circle": {"center": [_r(c[0], 3), _r(c[1], 3)], "radius": _r(size, 3)}})
                 else:
                     s = _r(size * math.sqrt(2), 3)
-                    out.append({"box": {"center": [_r(c[0], 3), _r(c[1], 3)], "size": [s, s],
-                                        "angle_deg": round(float(rng.uniform(0, 90)), 1)}})
+                    out.append(
+                        {
+                            "box": {
+                                "center": [_r(c[0], 3), _r(c[1], 3)],
+                                "size": [s, s],
+                                "angle_deg": round(float(rng.uniform(0, 90)), 1),
+                            }
+                        }
+                    )
                 break
     return out
 
@@ -223,12 +252,18 @@ def draw_map(rng: np.random.Generator, cfg: MapsConfig, name: str) -> ScenarioCo
         start = [_r(start_x, 3), _r(height / 2, 3)]
         goal = [_r(length - start_x, 3), _r(height / 2 + rng.uniform(-1.0, 1.0), 3)]
         spec = ScenarioConfig(
-            name=name, world=WorldBounds(0.0, 0.0, length, height), obstacles=obstacles,
+            name=name,
+            world=WorldBounds(0.0, 0.0, length, height),
+            obstacles=obstacles,
             team=TeamSpec(n=n, formation=kind, spacing=cfg.spacing, start=start, goal=goal, heading_deg=0.0),
-            robot=RobotSpec(drive=drive), time_limit=_r(3.0 * length + 60.0, 1))
+            robot=RobotSpec(drive=drive),
+            time_limit=_r(3.0 * length + 60.0, 1),
+        )
         scenario = build_scenario(spec)
         try:
-            route = Geometry(scenario).shortest_path(tuple(start), tuple(goal), scenario.spec.robot.radius + 0.05)
+            route = Geometry(scenario).shortest_path(
+                (start[0], start[1]), (goal[0], goal[1]), scenario.spec.robot.radius + 0.05
+            )
         except ValueError:
             continue
         if len(route) >= 2:

@@ -29,10 +29,21 @@ from stafpipe.world import WorldConfig, Worlds
 class BatchedTeamEnv:
     """B copies of one scenario (a built-in name or a scenario file), stepped together."""
 
-    def __init__(self, scenario: str = "corridor", worlds: int = 1, method: str = "dgnn", episode_steps: int = 400,
-                 formation: str | None = None, n: int | None = None, goal_tolerance: float = 0.3,
-                 world: WorldConfig | None = None, sensing: SensingConfig | None = None,
-                 reward: RewardConfig | None = None, policy: PolicyConfig | None = None, plan: Any = None) -> None:
+    def __init__(
+        self,
+        scenario: str = "corridor",
+        worlds: int = 1,
+        method: str = "dgnn",
+        episode_steps: int = 400,
+        formation: str | None = None,
+        n: int | None = None,
+        goal_tolerance: float = 0.3,
+        world: WorldConfig | None = None,
+        sensing: SensingConfig | None = None,
+        reward: RewardConfig | None = None,
+        policy: PolicyConfig | None = None,
+        plan: Any = None,
+    ) -> None:
         from stafpipe.errors import StafpipeError
         from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
 
@@ -42,7 +53,9 @@ class BatchedTeamEnv:
             raise StafpipeError(f"worlds and episode_steps must be >= 1, got {worlds} and {episode_steps}")
         sc = load_named_scenario(scenario)
         if formation or n:
-            team = dataclasses.replace(sc.spec.team, formation=formation or sc.spec.team.formation, n=n or sc.spec.team.n)
+            team = dataclasses.replace(
+                sc.spec.team, formation=formation or sc.spec.team.formation, n=n or sc.spec.team.n
+            )
             sc = build_scenario(dataclasses.replace(sc.spec, team=team))
         self.scenario, self.size, self.episode_steps = sc, worlds, episode_steps
         self.world_cfg, self.sensing = world or WorldConfig(), sensing or SensingConfig()
@@ -73,16 +86,19 @@ class BatchedTeamEnv:
         the trainer's metrics."""
         aim = self._step_info.aim
         before = np.linalg.norm(aim - self.worlds.pos, axis=-1)
-        self.obs, events = self.worlds.step(commands(np.asarray(actions, float), self.worlds.heading,
-                                                     self.worlds.robot.max_speed))
+        self.obs, events = self.worlds.step(
+            commands(np.asarray(actions, float), self.worlds.heading, self.worlds.robot.max_speed)
+        )
         self.hits += sum(len(e) for e in events)
-        reward, self.dist, self.reached = step_reward(self.adapter, self.worlds, self.obs, aim, before, self.reached,
-                                                      self.tolerance, self.reward_cfg)
+        reward, self.dist, self.reached = step_reward(
+            self.adapter, self.worlds, self.obs, aim, before, self.reached, self.tolerance, self.reward_cfg
+        )
         self.returns += reward
         self.t += 1
         done = self.t >= self.episode_steps
-        info = episode_stats(self.worlds, self.dist, self.reached, self.tolerance, self.hits, self.returns) if done \
-            else {}
+        info = (
+            episode_stats(self.worlds, self.dist, self.reached, self.tolerance, self.hits, self.returns) if done else {}
+        )
         return self._features(), reward, done, info
 
 
@@ -95,7 +111,7 @@ def _pettingzoo_env() -> type:
         """One world; each robot an agent whose observation is its row of the method's features, flattened:
         own (F), then for each robot j its edge features (E) and whether it is a neighbour (1): F + n (E + 1)."""
 
-        metadata = {"name": "stafpipe_team_v0", "render_modes": []}
+        metadata = {"name": "stafpipe_team_v0", "render_modes": []}  # noqa: RUF012 (PettingZoo's convention)
 
         def __init__(self, **kwargs: Any) -> None:
             self.batched = BatchedTeamEnv(worlds=1, **kwargs)
@@ -136,8 +152,8 @@ def _pettingzoo_env() -> type:
             obs = self._observe(feats)
             rewards = {a: float(reward[0, i]) for i, a in enumerate(self.possible_agents) if a in agents}
             infos = {a: dict(stats) for a in agents}
-            terminations = {a: False for a in agents}
-            truncations = {a: done for a in agents}
+            terminations = dict.fromkeys(agents, False)
+            truncations = dict.fromkeys(agents, done)
             if done:
                 self.agents = []
             return {a: obs[a] for a in agents}, rewards, terminations, truncations, infos

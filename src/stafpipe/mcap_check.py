@@ -13,6 +13,7 @@ import io
 import struct
 import zlib
 from dataclasses import dataclass, field
+from typing import BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -57,8 +58,9 @@ def _record_at(data: bytes, pos: int) -> tuple[int, int] | None:
 
 
 def _unreadable(data: bytes, pos: int) -> str:
-    if pos + 9 > len(data) or (data[pos] in _OPCODES and
-                               pos + 9 + int.from_bytes(data[pos + 1 : pos + 9], "little") > len(data)):
+    if pos + 9 > len(data) or (
+        data[pos] in _OPCODES and pos + 9 + int.from_bytes(data[pos + 1 : pos + 9], "little") > len(data)
+    ):
         return "a record runs past the end of the file (truncated)"
     return f"unknown record opcode {data[pos]}"
 
@@ -148,7 +150,7 @@ def intact_records(data: bytes) -> Scan:
     return scan
 
 
-def seal_data_crc(f: "io.BufferedRandom") -> None:
+def seal_data_crc(f: BinaryIO) -> None:
     """Write the data section's CRC into the DataEnd record of a finished MCAP file open for update (the ROS 2
     writer leaves it 0, "not computed", so a flipped byte between chunks would go unseen)."""
     f.seek(0)

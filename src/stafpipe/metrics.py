@@ -56,7 +56,8 @@ class MetricContext:
     goal_tolerance: float = 0.3
     sensing_radius: float = 2.0
     cfi_margin: float = 0.1
-    """Safety margin taken off each side of the passage: eta = passage_width - 2 margin (STAF Sec. 4 'with safety margin')."""
+    """Safety margin taken off each side of the passage: eta = passage_width - 2 margin (STAF Sec. 4 'with safety
+    margin')."""
 
 
 def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -132,8 +133,11 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
         for k in split:
             p = traj.positions[k, idx]
             diam.append(2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius))
-            eps.append(formation_integrity(p, ctx.formation, ctx.spacing, _heading(traj.velocities[k, idx], default),
-                                           ctx.angle_deg))
+            eps.append(
+                formation_integrity(
+                    p, ctx.formation, ctx.spacing, _heading(traj.velocities[k, idx], default), ctx.angle_deg
+                )
+            )
         for sigma in CFI_SIGMAS:
             out[f"sub{j + 1}_cfi_{sigma:g}"] = cfi(np.array(diam), np.array(eps), eta, sigma)
     return out

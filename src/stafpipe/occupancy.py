@@ -85,7 +85,10 @@ class OccupancyGrid:
                 continue
             for ring in [poly.exterior, *poly.interiors]:
                 xy = self.to_world(np.asarray(ring.coords) * self.resolution)
-                segments += [(tuple(map(float, xy[k])), tuple(map(float, xy[k + 1]))) for k in range(len(xy) - 1)]
+                segments += [
+                    ((float(xy[k, 0]), float(xy[k, 1])), (float(xy[k + 1, 0]), float(xy[k + 1, 1])))
+                    for k in range(len(xy) - 1)
+                ]
         return segments
 
 
@@ -154,13 +157,31 @@ def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
     if unknown not in ("occupied", "free"):
         raise MapError(f"occupancy.unknown must be occupied or free, got {unknown!r}")
     stat = image_path.stat()
-    return _grid(str(image_path), (stat.st_mtime_ns, stat.st_size), bool(negate), occupied_thresh, free_thresh, unknown,
-                 resolution, (ox, oy, yaw[0] if yaw else 0.0), str(path))
+    return _grid(
+        str(image_path),
+        (stat.st_mtime_ns, stat.st_size),
+        bool(negate),
+        occupied_thresh,
+        free_thresh,
+        unknown,
+        resolution,
+        (ox, oy, yaw[0] if yaw else 0.0),
+        str(path),
+    )
 
 
 @functools.lru_cache(maxsize=16)
-def _grid(image_path: str, version: tuple[int, int], negate: bool, occupied_thresh: float, free_thresh: float, unknown: str,
-          resolution: float, origin: tuple[float, float, float], source: str) -> OccupancyGrid:
+def _grid(
+    image_path: str,
+    version: tuple[int, int],
+    negate: bool,
+    occupied_thresh: float,
+    free_thresh: float,
+    unknown: str,
+    resolution: float,
+    origin: tuple[float, float, float],
+    source: str,
+) -> OccupancyGrid:
     """The cells of an image, read once per version of the file: a scenario is built several times per run (with
     each formation, each eval), and the image and its outline need not be read and united each time."""
     from PIL import Image, UnidentifiedImageError

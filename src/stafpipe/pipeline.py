@@ -46,7 +46,11 @@ class Pipeline:
 
 def find_pipeline(name_or_path: str) -> Path:
     """A pipeline file given by path, or by name in ./pipelines/ or the shipped pipelines/."""
-    candidates = [Path(name_or_path), Path("pipelines") / f"{name_or_path}.yaml", pipelines_dir() / f"{name_or_path}.yaml"]
+    candidates = [
+        Path(name_or_path),
+        Path("pipelines") / f"{name_or_path}.yaml",
+        pipelines_dir() / f"{name_or_path}.yaml",
+    ]
     for path in candidates:
         if path.is_file():
             return path
@@ -58,7 +62,7 @@ def load_pipeline(path: Path) -> Pipeline:
     """Read and validate a pipeline file; errors name the file and the bad field."""
     try:
         raw = OmegaConf.to_container(OmegaConf.load(path))
-    except Exception as exc:  # noqa: BLE001 - any parse error becomes one clear message
+    except Exception as exc:
         raise StafpipeError(f"{path}: not valid YAML ({exc})") from exc
     if not isinstance(raw, dict) or not isinstance(raw.get("steps"), list) or not raw["steps"]:
         raise StafpipeError(f"{path}: needs a non-empty list 'steps'")
@@ -110,8 +114,9 @@ def search_path_override(config_dirs: list[Path]) -> str:
     return f"hydra.searchpath=[{entries}]"
 
 
-def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("outputs"),
-                 config_dirs: list[Path] | None = None) -> int:
+def run_pipeline(
+    name_or_path: str, force: bool = False, out_root: Path = Path("outputs"), config_dirs: list[Path] | None = None
+) -> int:
     """Run every step in order; stop at the first failure. Returns the exit code. `config_dirs`: the user's own
     config directories, searched by every step (`stafpipe run --config-dir`)."""
     pipe = load_pipeline(find_pipeline(name_or_path))
@@ -120,8 +125,10 @@ def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("
     plan: list[tuple[PipelineStep, list[str], Path, str, DictConfig]] = []
     for i, step in enumerate(pipe.steps):  # compose every step first: a bad config stops the pipeline before any work
         if step.stage not in STAGE_FUNCTIONS:
-            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}': unknown stage {step.stage!r}; stages: "
-                                f"{sorted(STAGE_FUNCTIONS)}")
+            raise StafpipeError(
+                f"pipeline {pipe.name}: step '{step.name}': unknown stage {step.stage!r}; stages: "
+                f"{sorted(STAGE_FUNCTIONS)}"
+            )
 
         def ref(match: re.Match[str], _step: PipelineStep = step) -> str:
             if match.group(1) not in dirs:
@@ -134,8 +141,9 @@ def run_pipeline(name_or_path: str, force: bool = False, out_root: Path = Path("
         except Exception as exc:  # noqa: BLE001 - Hydra's composition errors, said in the user's terms
             from stafpipe.config.compose_errors import explain
 
-            raise StafpipeError(f"pipeline {pipe.name}: step '{step.name}' has a bad config: "
-                                f"{explain(exc, step.stage, overrides)}") from None
+            raise StafpipeError(
+                f"pipeline {pipe.name}: step '{step.name}' has a bad config: {explain(exc, step.stage, overrides)}"
+            ) from None
         digest = config_hash(cfg)
         run_dir = (out_root / "pipelines" / pipe.name / f"{i:02d}-{step.name}-{digest[:10]}").resolve()
         dirs[step.name] = run_dir

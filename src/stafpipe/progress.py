@@ -41,8 +41,10 @@ class _Heartbeat(threading.Thread):
         made = self.done - self.initial
         rate = made / elapsed if elapsed > 0 else 0.0
         eta = f", ETA {_clock((self.total - self.done) / rate)}" if rate > 0 and self.done < self.total else ""
-        return (f"{self.desc}: {self.done}/{self.total} {self.unit}s, {rate:.2f} {self.unit}s/s, "
-                f"elapsed {_clock(elapsed)}{eta}" + (f" ({self.notes})" if self.notes else ""))
+        return (
+            f"{self.desc}: {self.done}/{self.total} {self.unit}s, {rate:.2f} {self.unit}s/s, "
+            f"elapsed {_clock(elapsed)}{eta}" + (f" ({self.notes})" if self.notes else "")
+        )
 
     def run(self) -> None:
         while not self._stop_event.wait(EVERY):
@@ -54,7 +56,7 @@ class _Heartbeat(threading.Thread):
         log.info(self.line())
 
 
-class progress(Iterable[T]):  # noqa: N801 - used like tqdm, a function-like name
+class progress(Iterable[T]):
     """Iterate `items` showing progress: tqdm on a terminal, periodic log lines otherwise; `set_postfix` adds
     key=value notes (the latest training success rate, ...) to either."""
 

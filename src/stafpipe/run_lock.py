@@ -52,8 +52,10 @@ class RunDirLock:
                 if holder == me or not _alive(holder):
                     self.path.unlink(missing_ok=True)  # our own leftover, or a killed run's: stale
                     continue
-                raise RunDirInUse(f"{self.path.parent}: in use by another run ({holder}); wait for it to finish or "
-                                  f"choose another hydra.run.dir (if no such run is alive, delete {self.path})")
+                raise RunDirInUse(
+                    f"{self.path.parent}: in use by another run ({holder}); wait for it to finish or "
+                    f"choose another hydra.run.dir (if no such run is alive, delete {self.path})"
+                ) from None
             with os.fdopen(fd, "w") as f:
                 f.write(me)
             self.held = True

@@ -18,6 +18,7 @@ from omegaconf.errors import OmegaConfBaseException
 from stafpipe.errors import StafpipeError
 from stafpipe.formations import FORMATION_TYPES, formation_slots, place
 from stafpipe.occupancy import OccupancyGrid, load_map
+from stafpipe.sections import section
 
 DRIVES = ("holonomic", "diff_drive")
 
@@ -149,7 +150,9 @@ def _positive(value: Any, where: str) -> float:
 def _obstacle(item: Any, where: str) -> tuple[np.ndarray | None, list[Capsule]]:
     kinds = ("box", "polygon", "circle", "segment")
     if not isinstance(item, dict) or len(item) != 1 or next(iter(item)) not in kinds:
-        raise ScenarioError(f"{where} must be one of {{box: ..}}, {{polygon: ..}}, {{circle: ..}}, {{segment: ..}}, got {item!r}")
+        raise ScenarioError(
+            f"{where} must be one of {{box: ..}}, {{polygon: ..}}, {{circle: ..}}, {{segment: ..}}, got {item!r}"
+        )
     kind, body = next(iter(item.items()))
     where = f"{where}.{kind}"
     if kind == "box":
@@ -199,8 +202,8 @@ def _check(spec: ScenarioConfig) -> None:
     if not (w.xmax > w.xmin and w.ymax > w.ymin):
         raise ScenarioError(f"world must have xmax > xmin and ymax > ymin, got {w}")
     t, r = spec.team, spec.robot
-    if t.n < 1:
-        raise ScenarioError(f"team.n must be >= 1, got {t.n}")
+    if t.n < 2:
+        raise ScenarioError(f"team.n must be >= 2 (a formation needs two robots), got {t.n}")
     if t.formation not in FORMATION_TYPES:
         raise ScenarioError(f"team.formation must be one of {list(FORMATION_TYPES)}, got {t.formation!r}")
     _positive(t.spacing, "team.spacing")
@@ -241,7 +244,36 @@ def build_scenario(spec: ScenarioConfig) -> Scenario:
     w = spec.world
     corners = [(w.xmin, w.ymin), (w.xmax, w.ymin), (w.xmax, w.ymax), (w.xmin, w.ymax)]
     capsules.extend(Capsule(corners[i], corners[(i + 1) % 4], 0.0) for i in range(4))
-    return Scenario(spec, polygons, capsules, grid)
+    scenario = Scenario(spec, polygons, capsules, grid)
+    _check_placement(scenario)
+    return scenario
+
+
+def _check_placement(scenario: Scenario) -> None:
+    """Every robot's slot at the start and at the goal (placed as World.reset places them) lies inside the world and
+    clear of every obstacle: a team placed outside its world once ran with exit 0 and SR 1.0."""
+    from stafpipe.geometry import obstacle_distance
+
+    spec = scenario.spec
+    t, r, w = spec.team, spec.robot.radius, spec.world
+    unit = formation_slots(t.formation, t.n, t.spacing, t.angle_deg)
+    for key in ("start", "goal"):
+        slots = place(unit, np.array(getattr(t, key), dtype=float), math.radians(t.heading_deg))
+        outside = (slots[:, 0] - r < w.xmin) | (slots[:, 0] + r > w.xmax)
+        outside |= (slots[:, 1] - r < w.ymin) | (slots[:, 1] + r > w.ymax)
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise ScenarioError(
+                f"team.{key}: robot {k}'s slot {np.round(slots[k], 2).tolist()} lies outside the world {w} "
+                f"(team.n {t.n}, spacing {t.spacing}: the formation does not fit)"
+            )
+        clear = obstacle_distance(slots, scenario) - r
+        if (clear < -1e-6).any():
+            k = int(np.argmin(clear))
+            raise ScenarioError(
+                f"team.{key}: robot {k}'s slot {np.round(slots[k], 2).tolist()} overlaps an obstacle "
+                f"({-clear[k]:.2f} m deep)"
+            )
 
 
 def _map_obstacles(spec: ScenarioConfig, capsules: list[Capsule]) -> OccupancyGrid:
@@ -256,7 +288,9 @@ def _map_obstacles(spec: ScenarioConfig, capsules: list[Capsule]) -> OccupancyGr
         centre = np.array(getattr(t, key), dtype=float)
         slots = np.zeros((0, 2))
         if t.n >= 2:  # the robots' slots, placed as World.reset places them
-            slots = place(formation_slots(t.formation, t.n, t.spacing, t.angle_deg), centre, math.radians(t.heading_deg))
+            slots = place(
+                formation_slots(t.formation, t.n, t.spacing, t.angle_deg), centre, math.radians(t.heading_deg)
+            )
         hit = grid.contains(np.vstack([centre, slots]))
         if hit.any():
             where = "its centre" if hit[0] else f"robot {int(np.argmax(hit[1:]))}'s slot"
@@ -274,17 +308,22 @@ def _required_sections(raw: Any, path: Path) -> None:
     """A scenario file says where its team starts and ends and how big its world is: nothing of it is taken from the
     default corridor (an empty file or one without `team:` once ran as an obstacle-free corridor, exit 0)."""
     if not isinstance(raw, DictConfig) or len(raw) == 0:
-        raise ScenarioError(f"scenario file {path} is empty or not a mapping: it needs at least `world` (or "
-                            "`occupancy.map`) and `team` with `start` and `goal` (docs/scenarios.md)")
+        raise ScenarioError(
+            f"scenario file {path} is empty or not a mapping: it needs at least `world` (or "
+            "`occupancy.map`) and `team` with `start` and `goal` (docs/scenarios.md)"
+        )
     occupancy = raw.get("occupancy")
     if "world" not in raw and not (isinstance(occupancy, DictConfig) and occupancy.get("map")):
-        raise ScenarioError(f"scenario file {path} misses `world` (xmin, ymin, xmax, ymax) and has no `occupancy.map` "
-                            "to take it from")
+        raise ScenarioError(
+            f"scenario file {path} misses `world` (xmin, ymin, xmax, ymax) and has no `occupancy.map` to take it from"
+        )
     team = raw.get("team")
     missing = [k for k in ("start", "goal") if not isinstance(team, DictConfig) or k not in team]
     if missing:
-        raise ScenarioError(f"scenario file {path} misses `team.{missing[0]}`: a scenario names where its team starts "
-                            "and where it goes (team.start, team.goal)")
+        raise ScenarioError(
+            f"scenario file {path} misses `team.{missing[0]}`: a scenario names where its team starts "
+            "and where it goes (team.start, team.goal)"
+        )
 
 
 def load_scenario_file(path: str | Path) -> ScenarioConfig:
@@ -302,7 +341,7 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
     except OmegaConfBaseException as exc:
         key = getattr(exc, "full_key", None)
         raise ScenarioError(f"scenario file {path}: bad field {key!r}: {str(exc).splitlines()[0]}") from None
-    spec: ScenarioConfig = OmegaConf.to_object(merged)  # type: ignore[assignment]
+    spec = section(merged, ScenarioConfig)
     spec.path = None
     anchor_map(spec, path.parent)
     if spec.occupancy.map and "world" not in raw:  # the map's extent is the world
@@ -320,7 +359,7 @@ def resolve_scenario(cfg: Any) -> Scenario:
         spec = load_scenario_file(cfg.path)
     else:
         try:
-            spec = OmegaConf.to_object(cfg) if OmegaConf.is_config(cfg) else cfg
+            spec = section(cfg, ScenarioConfig)
         except OmegaConfBaseException as exc:
             raise ScenarioError(f"scenario: {str(exc).splitlines()[0]}") from None
         if spec.occupancy.map and not Path(spec.occupancy.map).exists():

@@ -15,7 +15,6 @@ from typing import NamedTuple
 import numpy as np
 
 
-
 @dataclass
 class SensingConfig:
     """Sensing and communication (group-free section `sensing`)."""
@@ -69,7 +68,7 @@ class Observation(NamedTuple):
     """(.., M, 4) moving obstacles: x, y, vx, vy (a walking human tracked by motion capture, Zhu et al. 2019 Section
     V-B); padding rows of a batch are far away and still."""
 
-    def world(self, b: int) -> "Observation":
+    def world(self, b: int) -> Observation:
         """The observation of world `b` of a batch."""
         return Observation(*(x[b] for x in self))
 
@@ -100,7 +99,8 @@ def observe(
     rngs: list[np.random.Generator],
     movers: np.ndarray | None = None,
 ) -> Observation:
-    """Observations of B worlds: pos, vel, goal (B, n, 2); obstacles as capsules seg_a, seg_b (B, C, 2), seg_r (B, C)."""
+    """Observations of B worlds: pos, vel, goal (B, n, 2); obstacles as capsules seg_a, seg_b (B, C, 2), seg_r (B,
+    C)."""
     # Closest point of every capsule spine, per coordinate: (B, n, C) arrays, no (.., 2) axis (this runs every step).
     px, py = pos[..., 0, None], pos[..., 1, None]
     ax, ay = seg_a[..., None, :, 0], seg_a[..., None, :, 1]
@@ -114,7 +114,9 @@ def observe(
     surface = np.take_along_axis(surfaces, k, axis=-1)[..., 0]
     # The obstacle vector points at the capsule's surface, not its spine.
     scale = np.maximum(surface, 0.0) / np.maximum(dist_c, 1e-12)
-    obstacle = np.stack([np.take_along_axis(dx, k, axis=-1)[..., 0], np.take_along_axis(dy, k, axis=-1)[..., 0]], axis=-1)
+    obstacle = np.stack(
+        [np.take_along_axis(dx, k, axis=-1)[..., 0], np.take_along_axis(dy, k, axis=-1)[..., 0]], axis=-1
+    )
     obstacle *= scale[..., None]
     obstacle_distance = surface - robot_radius
 

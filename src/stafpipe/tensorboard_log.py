@@ -34,5 +34,5 @@ class ScalarLog:
 def _tag(key: str) -> str:
     for prefix in ("train_", "val_"):
         if key.startswith(prefix):
-            return prefix[:-1] + "/" + key[len(prefix):]
+            return prefix[:-1] + "/" + key[len(prefix) :]
     return key

@@ -20,10 +20,11 @@ def save_payload(path: Path, payload: dict[str, Any]) -> Path:
 
 
 def load_payload(path: Path, error: type[StafpipeError], what: str, hint: str = "") -> Any:
-    """The plain data in a torch file (`weights_only`: no code runs); `error` naming the file if it is missing or damaged."""
+    """The plain data in a torch file (`weights_only`: no code runs); `error` naming the file if it is missing or
+    damaged."""
     if not path.is_file():
         raise error(f"{path}: no such {what}" + (f" ({hint})" if hint else ""))
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises several kinds for a damaged file
+    except Exception as exc:  # noqa: BLE001 (torch raises several kinds for a damaged file)
         raise error(f"{path}: not a readable {what} ({type(exc).__name__}: {exc})") from None

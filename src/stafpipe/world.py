@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pymunk
+import pymunk.autogeometry
 import pymunk.batch as pb
 from pymunk._chipmunk import ffi as _ffi
 from pymunk._chipmunk import lib as _cp
@@ -36,9 +37,11 @@ class WorldConfig:
     control_dt: float = 0.1
     """Control period in seconds (one `step`)."""
     substeps: int = 4
-    """Physics substeps per control period: 4 keep robot-robot overlaps to a few cm (measured on the 2-core development machine)."""
+    """Physics substeps per control period: 4 keep robot-robot overlaps to a few cm (measured on the 2-core development
+    machine)."""
     collision_slop: float = 0.005
-    """pymunk's allowed overlap; the default 0.1 lets robots leave walled boxes (measured on the 2-core development machine)."""
+    """pymunk's allowed overlap; the default 0.1 lets robots leave walled boxes (measured on the 2-core development
+    machine)."""
     start_noise: float = 0.05
     """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
 
@@ -60,14 +63,16 @@ class Collision:
 
 
 class _BodyIO:
-    """pymunk's batch body get/set, prepared once per space (what pymunk.batch does per call, without the per-call setup).
+    """pymunk's batch body get/set, prepared once per space (what pymunk.batch does per call, without the per-call
+    setup).
 
-    `velocity_rows` (bodies, 2) is read by `set_velocities`; `state` (bodies, 4: x, y, vx, vy) is a view of a pymunk-owned
+    `velocity_rows` (bodies, 2) is read by `set_velocities`; `state` (bodies, 4: x, y, vx, vy) is a view of a
+    pymunk-owned
     array of exactly that size, refilled by `get_state`, so pymunk never grows (reallocates) it.
     """
 
     def __init__(self, space: pymunk.Space, bodies: int):
-        self.handle = space._space  # noqa: SLF001
+        self.handle = space._space
         self.velocity_rows = np.zeros((bodies, 2))
         self._set_arr = _ffi.new("pmFloatArray *")
         self._set_mem = _ffi.from_buffer("cpFloat[]", self.velocity_rows.reshape(-1))
@@ -119,10 +124,11 @@ def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
     space = pymunk.Space()
     space.collision_slop = cfg.collision_slop
     r = scenario.spec.robot.radius
-    robots, robot_of = [], {}
+    robots: list[pymunk.Body] = []
+    robot_of: dict[pymunk.Shape, int] = {}
     for i in range(n):
         body = pymunk.Body(1.0, math.inf)
-        shape = pymunk.Circle(body, r)
+        shape: pymunk.Shape = pymunk.Circle(body, r)
         shape.collision_type, shape.friction, shape.elasticity = ROBOT, 0.0, 0.0
         space.add(body, shape)
         robots.append(body)
@@ -130,7 +136,9 @@ def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
     for poly in scenario.polygons:
         parts = [poly]
         if len(pymunk.Poly(None, poly.tolist()).get_vertices()) != len(poly):  # concave: split into convex parts
-            parts = [np.array(p) for p in pymunk.autogeometry.convex_decomposition(poly.tolist() + [poly[0].tolist()], 0.01)]
+            parts = [
+                np.array(p) for p in pymunk.autogeometry.convex_decomposition(poly.tolist() + [poly[0].tolist()], 0.01)
+            ]
         for part in parts:
             shape = pymunk.Poly(space.static_body, [tuple(p) for p in part])
             shape.collision_type = STATIC
@@ -219,9 +227,11 @@ class Worlds:
             h = math.radians(team.heading_deg)
             rng = np.random.default_rng(seed)
             self.rngs[w] = rng
-            jitter = np.clip(rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise)
-            self.pos[w] = place(slots, team.start, h) + jitter
-            self.goal[w] = place(slots, team.goal, h)
+            jitter = np.clip(
+                rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise
+            )
+            self.pos[w] = place(slots, np.asarray(team.start), h) + jitter
+            self.goal[w] = place(slots, np.asarray(team.goal), h)
             self.vel[w] = 0.0
             self.heading[w] = h
             self.time[w] = 0.0
@@ -292,8 +302,18 @@ class Worlds:
     def observe(self) -> Observation:
         """Observations of every robot of every world."""
         return observe(
-            self.pos, self.vel, self.heading, self.goal, self.time.copy(),
-            self.seg_a, self.seg_b, self.seg_r, self.robot.radius, self.sensing, self.rngs, self.movers.copy(),
+            self.pos,
+            self.vel,
+            self.heading,
+            self.goal,
+            self.time.copy(),
+            self.seg_a,
+            self.seg_b,
+            self.seg_r,
+            self.robot.radius,
+            self.sensing,
+            self.rngs,
+            self.movers.copy(),
         )
 
     def mover_positions(self, w: int) -> np.ndarray:

@@ -19,33 +19,59 @@ def check_run_config(cfg: DictConfig) -> None:
     _unknown_keys(cfg, "")
     _non_finite(OmegaConf.to_container(cfg, resolve=True), "")
     require(int(cfg.seed) >= 0, "seed", "must be >= 0", cfg.seed)
-    for key in ("world", "sensing", "eval"):
-        if key in cfg:
-            section = OmegaConf.to_object(cfg[key])
-            section.check(key)  # type: ignore[union-attr]
+    for key in ("world", "sensing", "eval", *STAGE_SECTIONS.get(str(cfg.get("stage")), ())):
+        if key in cfg and cfg[key] is not None:
+            check = getattr(OmegaConf.to_object(cfg[key]), "check", None)
+            if check is not None:
+                check(key)
+    _method_with_the_run(cfg)
+
+
+STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
+    "generate": ("data", "formation"),
+    "generate-maps": ("maps",),
+    "train-high": ("high", "train_high"),
+    "train-ppo": ("train_ppo",),
+    "ablate": ("ablate", "high", "train_high"),
+    "eval": ("method",),
+    "plot": ("plot",),
+}
+"""The sections each stage reads, besides world, sensing and eval: checked with the rest before any work (and for
+every job of a sweep before its first job runs)."""
+
+
+def _method_with_the_run(cfg: DictConfig) -> None:
+    """Cross-section rules: a method whose settings must agree with the run's sensing and world (its
+    `check_run(sensing, world, key)`: a learned method's radius, Cezayirli's d_max, range error and period)."""
+    if "method" not in cfg or "sensing" not in cfg or "world" not in cfg or cfg.method is None:
+        return
+    method = OmegaConf.to_object(cfg.method)
+    check_run = getattr(method, "check_run", None)
+    if check_run is not None:
+        check_run(OmegaConf.to_object(cfg.sensing), OmegaConf.to_object(cfg.world), "method")
 
 
 def _unknown_keys(node: DictConfig, path: str) -> None:
     kind = OmegaConf.get_type(node)
     if kind is not None and dataclasses.is_dataclass(kind):
         known = [f.name for f in dataclasses.fields(kind)]
-        for key in node.keys():
+        for key in map(str, node):
             if key not in known:
                 name = f"{path}.{key}" if path else str(key)
                 close = difflib.get_close_matches(str(key), known, n=1)
                 hint = f" (did you mean {path + '.' if path else ''}{close[0]}?)" if close else ""
                 raise ConfigError(f"{name} is not a setting of `{path or 'the config'}`{hint}")
-    for key in node.keys():
-        child = node._get_node(key)  # noqa: SLF001 - the node itself, so that its type is kept
+    for key in map(str, node):
+        child = node._get_node(key)
         if isinstance(child, DictConfig):
             _unknown_keys(child, f"{path}.{key}" if path else str(key))
         elif isinstance(child, ListConfig):
-            for i, item in enumerate(child._iter_ex(resolve=False)):  # noqa: SLF001
+            for i, item in enumerate(child._iter_ex(resolve=False)):
                 if isinstance(item, DictConfig):
                     _unknown_keys(item, f"{path}.{key}[{i}]" if path else f"{key}[{i}]")
 
 
-def _non_finite(node: Any, path: str) -> None:  # noqa: ANN401 - a plain container
+def _non_finite(node: Any, path: str) -> None:
     if isinstance(node, dict):
         for key, value in node.items():
             _non_finite(value, f"{path}.{key}" if path else str(key))
@@ -54,3 +80,15 @@ def _non_finite(node: Any, path: str) -> None:  # noqa: ANN401 - a plain contain
             _non_finite(value, f"{path}[{i}]")
     elif isinstance(node, float) and not math.isfinite(node):
         raise ConfigError(f"{path} must be a finite number, got {node}")
+
+
+def check_sensing_radius(mine: float, run: float, allowed: bool, key: str) -> None:
+    """A learned method's `sensing_radius` is > 0 and equals the run's `sensing.radius` (its features clip what the
+    robot senses at its own radius, so a larger world radius would show it neighbours it never saw in training),
+    unless `allow_mismatch`."""
+    require(mine > 0, f"{key}.sensing_radius", "must be > 0", mine)
+    if not allowed and not math.isclose(mine, run):
+        raise ConfigError(
+            f"{key}.sensing_radius ({mine:g}) differs from sensing.radius ({run:g}): set both to the radius the "
+            f"policy was trained with (its checkpoint's made_by), or {key}.allow_mismatch=true"
+        )

@@ -9,8 +9,9 @@ import re
 from collections.abc import Sequence
 
 from hydra.errors import HydraException, MissingConfigException
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
+
 
 def jobs_to_check(overrides: Sequence[str]) -> list[list[str]] | None:
     """Overrides of jobs that together try every value a command line gives: the first job (a sweep's first value
@@ -22,13 +23,17 @@ def jobs_to_check(overrides: Sequence[str]) -> list[list[str]] | None:
     if any(o.startswith("-") for o in plain):
         return None
     parsed = OverridesParser.create().parse_overrides(plain)  # a syntax error raises: reported by `explain`
-    values = [[f"{ov.get_key_element()}={v}" for v in ov.sweep_string_iterator()] if ov.is_sweep_override()
-              else [ov.input_line] for ov in parsed]
+    values = [
+        [f"{ov.get_key_element()}={v}" for v in ov.sweep_string_iterator()]
+        if ov.is_sweep_override()
+        else [ov.input_line]
+        for ov in parsed
+    ]
     first = [v[0] for v in values]
     jobs = [first]
     for k, options in enumerate(values):
         jobs += [first[:k] + [v] + first[k + 1 :] for v in options[1:]]
-    return jobs
+    return [[str(part) for part in job] for job in jobs]
 
 
 def explain(exc: BaseException, stage: str, overrides: Sequence[str]) -> str:
@@ -42,8 +47,9 @@ def explain(exc: BaseException, stage: str, overrides: Sequence[str]) -> str:
         hint = f" (did you mean {group}={close[0]}?)" if close else ""
         return f"{group}={option}: no such {group}{hint}; choose one of: {', '.join(choices)}"
     text = str(exc)
-    missing = re.search(r"Could not (?:override|append to|delete) '([^']+)'", text) or \
-        re.search(r"Key '([^']+)' (?:is not in struct|not in)", text)  # Hydra's wording (1.3)
+    missing = re.search(r"Could not (?:override|append to|delete) '([^']+)'", text) or re.search(
+        r"Key '([^']+)' (?:is not in struct|not in)", text
+    )  # Hydra's wording (1.3)
     if missing:
         key = missing.group(1)
         others = [o for o in overrides if o.lstrip("+~").split("=", 1)[0] != key]
@@ -63,7 +69,7 @@ def _did_you_mean(cfg: DictConfig | None, key: str) -> str:
     if cfg is None:
         return ""
     parts = key.split(".")
-    node, path = cfg, []
+    node, path = cfg, list[str]()
     for part in parts[:-1]:
         child = node.get(part) if isinstance(node, DictConfig) else None
         if not isinstance(child, DictConfig):
@@ -71,5 +77,5 @@ def _did_you_mean(cfg: DictConfig | None, key: str) -> str:
             close = difflib.get_close_matches(part, [str(n) for n in names], n=1)
             return f" (did you mean {'.'.join([*path, close[0]])}?)" if close else ""
         node, path = child, [*path, part]
-    close = difflib.get_close_matches(parts[-1], [str(k) for k in OmegaConf.to_container(node).keys()], n=1)
+    close = difflib.get_close_matches(parts[-1], [str(k) for k in node], n=1)
     return f" (did you mean {'.'.join([*path, close[0]])}?)" if close else ""

@@ -148,8 +148,12 @@ class PlotConfig:
 
     def check(self, key: str = "plot") -> None:
         require(self.kind in PLOT_KINDS, f"{key}.kind", f"must be one of {list(PLOT_KINDS)}", self.kind)
-        require(bool(self.run_dir) or bool(self.run_dirs), f"{key}.run_dir", "is required: the run directory to draw from",
-                self.run_dir)
+        require(
+            bool(self.run_dir) or bool(self.run_dirs),
+            f"{key}.run_dir",
+            "is required: the run directory to draw from",
+            self.run_dir,
+        )
         require(self.max_episodes >= 0, f"{key}.max_episodes", "must be >= 0", self.max_episodes)
         for fmt in self.formats:
             require(fmt in FORMATS, f"{key}.formats", f"entries must be in {list(FORMATS)}", fmt)

@@ -11,7 +11,10 @@ from stafpipe.controllers.base import Controller, Event, TeamInfo
 METHODS: dict[str, tuple[str, str]] = {
     "straight": ("stafpipe.controllers.straight:StraightConfig", "stafpipe.controllers.straight:StraightController"),
     "lf": ("stafpipe.controllers.lf:LFConfig", "stafpipe.controllers.lf:LFController"),
-    "cezayirli": ("stafpipe.controllers.cezayirli:CezayirliConfig", "stafpipe.controllers.cezayirli:CezayirliController"),
+    "cezayirli": (
+        "stafpipe.controllers.cezayirli:CezayirliConfig",
+        "stafpipe.controllers.cezayirli:CezayirliController",
+    ),
     "zhu": ("stafpipe.controllers.zhu:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
     "staf": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),

@@ -84,8 +84,9 @@ class Controller:
         return out
 
 
-def limit_approach(v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float,
-                   stop_gap: float = 0.02) -> np.ndarray:
+def limit_approach(
+    v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float, stop_gap: float = 0.02
+) -> np.ndarray:
     """Collision avoidance shared by the classical methods: towards any robot or obstacle closer than `avoid_distance`
     (surface to surface), the approach speed is capped at avoid_gain x (gap - stop_gap), so robots slide along and
     stop short of contact."""

@@ -1,7 +1,8 @@
 """`method=cezayirli`: non-communicating robots with switchable formations (Cezayirli and Kerestecioglu, "A
 Non-Communicating Multi-Robot System with Switchable Formations"). Robots have no IDs and no communication; each sees
 the robots within d_max (sensing.radius)
-with bounded range and bearing errors (sensing.range_error, sensing.bearing_error_deg) and occlusion (sensing.occlusion).
+with bounded range and bearing errors (sensing.range_error, sensing.bearing_error_deg) and occlusion
+(sensing.occlusion).
 
 Local Steering Strategy (Section III, Fig. 2): a follower steps towards the minimiser of its cost J by the gradient step
 (11), x_i(t + dt) = -gamma grad J at its own position (local coordinates, robot at the origin); the leader steps along
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -75,23 +77,43 @@ class CezayirliConfig:
     switches: list[Switch] = field(default_factory=list)
 
     def check(self, key: str = "method") -> None:
-        require(self.d_max > self.range_error > 0, f"{key}.d_max/range_error", "need d_max > range_error > 0",
-                (self.d_max, self.range_error))
+        require(
+            self.d_max > self.range_error > 0,
+            f"{key}.d_max/range_error",
+            "need d_max > range_error > 0",
+            (self.d_max, self.range_error),
+        )
         d_m = self.d_max - self.range_error
-        require(0 < self.d0 < d_m and 0 < self.d1 < d_m, f"{key}.d0/d1", f"must be in (0, d_m = {d_m:g})",
-                (self.d0, self.d1))
+        require(
+            0 < self.d0 < d_m and 0 < self.d1 < d_m,
+            f"{key}.d0/d1",
+            f"must be in (0, d_m = {d_m:g})",
+            (self.d0, self.d1),
+        )
         require(self.period > 0, f"{key}.period", "must be > 0", self.period)
         require(self.beta > 0 and self.gamma > 0, f"{key}.beta/gamma", "must be > 0", (self.beta, self.gamma))
         for s in [self.initial_cost, *[w.cost for w in self.switches]]:
             require(s in COSTS, f"{key}.switches", f"costs must be in {list(COSTS)}", s)
+
+    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
+        """The robots' sensor is the run's (Section II): d_max = sensing.radius, Delta r = sensing.range_error, and one
+        steering step per control period."""
+        for mine, theirs, name in (
+            (self.d_max, sensing.radius, "d_max/sensing.radius"),
+            (self.range_error, sensing.range_error, "range_error/sensing.range_error"),
+            (self.period, world.control_dt, "period/world.control_dt"),
+        ):
+            require(math.isclose(mine, theirs), f"{key}.{name}", "must be equal (e.g. experiment=cezayirli_sim1)",
+                    (mine, theirs))  # fmt: skip
 
 
 def _unit(deg: float) -> np.ndarray:
     return np.array([math.cos(math.radians(deg)), math.sin(math.radians(deg))])
 
 
-def cost_gradient(x: np.ndarray, cost: str, cfg: CezayirliConfig, e_l: np.ndarray,
-                  course: np.ndarray | None = None) -> np.ndarray:
+def cost_gradient(
+    x: np.ndarray, cost: str, cfg: CezayirliConfig, e_l: np.ndarray, course: np.ndarray | None = None
+) -> np.ndarray:
     """grad J at the robot's own position (the origin), for sensed relative positions x (M, 2): z_k = -x_k.
 
     With `course` (the V's direction), a must also lie ahead along it (ours, see docs/cezayirli.md)."""
@@ -171,7 +193,10 @@ class CezayirliController(Controller):
         for i in range(self.n):
             x = obs.rel_position[i][obs.neighbours[i]]  # measured, errors and occlusion included
             if i == self.leader:
-                while self.waypoint + 1 < len(self.trajectory) and np.linalg.norm(self.trajectory[self.waypoint] - p[i]) < limit:
+                while (
+                    self.waypoint + 1 < len(self.trajectory)
+                    and np.linalg.norm(self.trajectory[self.waypoint] - p[i]) < limit
+                ):
                     self.waypoint += 1
                 d = self.trajectory[self.waypoint] - p[i]
                 size = min(cfg.leader_speed * limit, float(np.linalg.norm(d)))

@@ -5,6 +5,7 @@ own goal slot; no subteams. Driven through `learning/adapters.py:DGNNAdapter`, a
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from stafpipe.controllers.learned import LearnedController
 
@@ -23,6 +24,12 @@ class DGNNConfig:
     allow_mismatch: bool = False
     """Run a checkpoint whose recorded training settings (plan, sensing radius) differ from this run's, with a
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
+
+    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
+        """With the run's sensing: the policy's features clip what it senses at its own radius."""
+        from stafpipe.config.checks import check_sensing_radius
+
+        check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)
 
 
 class DGNNController(LearnedController):

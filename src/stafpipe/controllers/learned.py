@@ -27,7 +27,7 @@ PLAN_SAFEGUARDS = ("home", "target_gap")
 with them, so they are not compared with its training record."""
 
 
-def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:  # noqa: ANN401
+def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:
     """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the plan
     (`method.plan.*` against `train_ppo.plan.*`) and the sensing radius (against `sensing.radius`), as far as the
     checkpoint recorded them. Key -> (this run's value, the training value)."""
@@ -49,7 +49,7 @@ class LearnedController(Controller):
     `cfg.deterministic` is false. `cfg.low_level` other than `learned` (where the config has it) replaces the
     network's action by a hand-made low level (learning/teachers.py): the method with its learned part removed."""
 
-    def __init__(self, cfg) -> None:  # noqa: ANN001 - a method config dataclass (DGNNConfig, StafMethodConfig)
+    def __init__(self, cfg) -> None:
         super().__init__()
         check = getattr(cfg, "check", None)
         if check:
@@ -62,11 +62,14 @@ class LearnedController(Controller):
             text = "; ".join(f"{k}: this run {a!r}, trained with {b!r}" for k, (a, b) in differ.items())
             where = cfg.checkpoint or f"the shipped {cfg.name} policy"
             if not getattr(cfg, "allow_mismatch", False):
-                raise StafpipeError(f"{where} was trained with other settings than this run ({text}); retrain it, "
-                                    "or set method.allow_mismatch=true to run it anyway")
+                raise StafpipeError(
+                    f"{where} was trained with other settings than this run ({text}); retrain it, "
+                    "or set method.allow_mismatch=true to run it anyway"
+                )
             log.warning("%s was trained with other settings than this run: %s", where, text)
-        self.adapter = ADAPTERS[cfg.name](self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None),
-                                          cfg.sensing_radius)
+        self.adapter = ADAPTERS[cfg.name](
+            self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
+        )
         self.generator = torch.Generator().manual_seed(0)
         self.max_speed = 1.0
         self.last_time = 0.0
@@ -87,11 +90,12 @@ class LearnedController(Controller):
             self.emit(kind, robots, detail)
         if self.teacher != "learned":
             radius = self.adapter.teams[0].scenario.spec.robot.radius
-            mean = teacher_actions(self.teacher, targets - batch.position, batch, radius, self.max_speed,
-                                   self.cfg.proportional_gain)
+            mean = teacher_actions(
+                self.teacher, targets - batch.position, batch, radius, self.max_speed, self.cfg.proportional_gain
+            )
             return commands(mean[0], obs.heading, self.max_speed)
         with torch.inference_mode():  # execution: no critic, no autograd bookkeeping
-            mean = self.policy.act(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
+            action = self.policy.act(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
             if not self.cfg.deterministic:
-                mean = mean + self.policy.log_std.exp() * torch.randn(mean.shape, generator=self.generator)
-        return commands(mean[0].numpy(), obs.heading, self.max_speed)
+                action = action + self.policy.log_std.exp() * torch.randn(action.shape, generator=self.generator)
+        return commands(action[0].numpy(), obs.heading, self.max_speed)

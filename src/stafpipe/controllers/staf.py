@@ -8,6 +8,7 @@ adapting the formation to the passage and keeping clear of robots and walls. Dri
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from stafpipe.controllers.learned import LearnedController
 from stafpipe.controllers.staf_plan import PlanConfig
@@ -40,10 +41,20 @@ class StafMethodConfig:
         from stafpipe.errors import require
         from stafpipe.learning.teachers import TEACHERS
 
-        require(self.low_level in ("learned", *TEACHERS), f"{key}.low_level",
-                f"must be one of {['learned', *TEACHERS]}", self.low_level)
+        require(
+            self.low_level in ("learned", *TEACHERS),
+            f"{key}.low_level",
+            f"must be one of {['learned', *TEACHERS]}",
+            self.low_level,
+        )
         require(self.proportional_gain > 0, f"{key}.proportional_gain", "must be > 0", self.proportional_gain)
         self.plan.check(f"{key}.plan")
+
+    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
+        """With the run's sensing: the policy's features clip what it senses at its own radius."""
+        from stafpipe.config.checks import check_sensing_radius
+
+        check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)
 
 
 class StafController(LearnedController):

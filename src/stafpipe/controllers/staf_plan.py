@@ -75,8 +75,9 @@ class PlanConfig:
     def check(self, key: str) -> None:
         from stafpipe.errors import require
 
-        require(self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4",
-                self.m)
+        require(
+            self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4", self.m
+        )
         require(self.adapt in ("geometric", "nominal"), f"{key}.adapt", "must be geometric or nominal", self.adapt)
         for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
@@ -152,8 +153,9 @@ def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
     return np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
 
 
-def lateral_clearance(points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0,
-                      step: float = 0.05) -> np.ndarray:
+def lateral_clearance(
+    points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0, step: float = 0.05
+) -> np.ndarray:
     """(P,) free distance from each path point to the nearest obstacle straight across the path (the smaller of the
     left and right sides, up to `reach`): the half-width a formation centred on the path may use. Distance to
     obstacles ahead or behind does not count (a wall behind the goal does not make the goal area narrow)."""
@@ -173,8 +175,16 @@ def lateral_clearance(points: np.ndarray, heading: np.ndarray, scenario, reach: 
 class StafPlan:
     """The plan of one episode: call `reset` with the team, then `step` once per control step."""
 
-    def __init__(self, cfg: PlanConfig, scenario, template: np.ndarray, goal: np.ndarray, path: np.ndarray,
-                 passage_width: float, divide) -> None:
+    def __init__(
+        self,
+        cfg: PlanConfig,
+        scenario,
+        template: np.ndarray,
+        goal: np.ndarray,
+        path: np.ndarray,
+        passage_width: float,
+        divide,
+    ) -> None:
         """`divide(pos, goal, m) -> labels` is the high level (so tests and training can pass any partitioner)."""
         spec = scenario.spec
         self.cfg, self.goal_slots, self.divide = cfg, np.asarray(goal, float), divide
@@ -183,7 +193,8 @@ class StafPlan:
         self.max_speed = spec.robot.max_speed
         self.n = len(goal)
         self.goal = self.goal_slots.copy()
-        """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are alike."""
+        """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are
+        alike."""
         self.frame = PathFrame(path)
         # free space across the path every 0.1 m: where the full team fits, and how far subteams must shrink
         self.ds = 0.1
@@ -220,8 +231,9 @@ class StafPlan:
 
         if self.cfg.m != "auto":
             return min(int(self.cfg.m), max(1, self.n - 1))
-        return choose_m(self.kind, self.n, eta, self.radius, self.cfg.safe_gap, min(4, max(1, self.n - 1)),
-                        self.angle)[0]
+        return choose_m(self.kind, self.n, eta, self.radius, self.cfg.safe_gap, min(4, max(1, self.n - 1)), self.angle)[
+            0
+        ]
 
     def reset(self) -> None:
         self.labels = np.zeros(self.n, dtype=int)
@@ -293,7 +305,8 @@ class StafPlan:
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
         lateral = np.abs(self.frame.lateral(pos))
         teams.sort(key=lambda idx: -(progress[idx].mean() - lateral[idx].mean()))
-        self.order, self.slots, anchors, self.file_weights = [], [], [], []
+        anchors: list[float] = []
+        self.order, self.slots, self.file_weights = [], [], []
         last_depth = 0.0
         for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
             unit = unit_slots(self.kind, len(idx), self.angle)
@@ -301,7 +314,11 @@ class StafPlan:
             self.file_weights.append(self._file_weights(unit))
             if self.file_weights[-1].any():  # room for the column the subteam becomes in single file
                 depth = max(depth, (len(idx) - 1) * self.spacing + 2 * self.radius)
-            a = progress.max() + depth / 2 if not anchors else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
+            a = (
+                progress.max() + depth / 2
+                if not anchors
+                else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
+            )
             point, heading = self.frame.at(a)
             c, s = math.cos(heading), math.sin(heading)
             perm = assign_slots(pos[idx], unit * self.spacing @ np.array([[c, s], [-s, c]]) + point)
@@ -316,8 +333,7 @@ class StafPlan:
         # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
         self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
         self.split_from, self.split_frac, self.split_rate = pos.copy(), 0.0, 0.0
-        self.events.append(("split", list(range(self.n)),
-                            f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
+        self.events.append(("split", list(range(self.n)), f"m={len(self.order)} sizes={[len(i) for i in self.order]}"))
 
     def _slide_into_subteams(self, dt: float) -> None:
         """After the split the targets slide from where the robots were to their subteam slots, all the same fraction
@@ -398,8 +414,11 @@ class StafPlan:
     def _release(self, progress: np.ndarray) -> None:
         """A waiting subteam starts once every robot of the subteam ahead is `follow_gap` ahead of all of its own."""
         for j in range(1, len(self.order)):
-            if self.hold[j] is not None and self.hold[j - 1] is None and \
-                    progress[self.order[j - 1]].min() >= progress[self.order[j]].max() + self.cfg.follow_gap:
+            if (
+                self.hold[j] is not None
+                and self.hold[j - 1] is None
+                and progress[self.order[j - 1]].min() >= progress[self.order[j]].max() + self.cfg.follow_gap
+            ):
                 self.hold[j] = None
                 self.anchor[j] = max(self.anchor[j], float(progress[self.order[j]].mean()))
 

@@ -1,4 +1,5 @@
-"""`method=straight`: every robot drives straight to its own goal slot. A test fixture for the harness, not a baseline."""
+"""`method=straight`: every robot drives straight to its own goal slot. A test fixture for the harness, not a
+baseline."""
 
 from __future__ import annotations
 

@@ -27,10 +27,25 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
-from stafpipe.controllers.zhu_decisions import (StuckDetector, comm_components, intersection_graph, merge_candidate,
-                                                merge_requests, mutual_merges, needs_split, split_team)
-from stafpipe.convex_region import (Region, fit_centres, footprint_area, grow_halfplanes, hull_vertices, intersect_all,
-                                    regions_from_halfplanes)
+from stafpipe.controllers.zhu_decisions import (
+    StuckDetector,
+    comm_components,
+    intersection_graph,
+    merge_candidate,
+    merge_requests,
+    mutual_merges,
+    needs_split,
+    split_team,
+)
+from stafpipe.convex_region import (
+    Region,
+    fit_centres,
+    footprint_area,
+    grow_halfplanes,
+    hull_vertices,
+    intersect_all,
+    regions_from_halfplanes,
+)
 from stafpipe.errors import require
 from stafpipe.formations import assign_slots, formation_slots, rotation
 from stafpipe.geometry import capsule_arrays
@@ -112,27 +127,52 @@ class ZhuConfig:
         require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)
         require(self.behind > 0, f"{key}.behind", "must be > 0", self.behind)
         require(self.horizon >= 0, f"{key}.horizon", "must be >= 0", self.horizon)
-        require(self.decision_period > 0 and self.control_period > 0, f"{key}.decision_period/control_period",
-                "must be > 0", (self.decision_period, self.control_period))
+        require(
+            self.decision_period > 0 and self.control_period > 0,
+            f"{key}.decision_period/control_period",
+            "must be > 0",
+            (self.decision_period, self.control_period),
+        )
         require(self.v_min is None or self.v_min > 0, f"{key}.v_min", "must be > 0 or null", self.v_min)
         require(self.visibility_sides >= 4, f"{key}.visibility_sides", "must be >= 4", self.visibility_sides)
         if self.v_min is not None:  # the whole visibility polygon is the largest region a robot can have
             k = self.visibility_sides
             largest = 0.5 * k * self.visibility**2 * math.sin(2 * math.pi / k)
-            require(self.v_min < largest, f"{key}.v_min", f"is larger than any region can be ({largest:.1f} m^2 "
-                    f"for visibility {self.visibility:g} m): the team would split at once and never merge", self.v_min)
+            require(
+                self.v_min < largest,
+                f"{key}.v_min",
+                f"is larger than any region can be ({largest:.1f} m^2 "
+                f"for visibility {self.visibility:g} m): the team would split at once and never merge",
+                self.v_min,
+            )
         require(self.p_max > 0, f"{key}.p_max", "must be > 0", self.p_max)
         require(self.max_subteams >= 2, f"{key}.max_subteams", "must be >= 2", self.max_subteams)
-        require(self.reference_speed > 0 and self.max_lag > 0, f"{key}.reference_speed/max_lag", "must be > 0",
-                (self.reference_speed, self.max_lag))
-        require(len(self.scales) > 0 and all(0 < s <= 1 for s in self.scales), f"{key}.scales", "need values in (0, 1]",
-                self.scales)
-        require(self.n_dead >= 1 and self.dp_min > 0, f"{key}.n_dead/dp_min", "must be >= 1 and > 0",
-                (self.n_dead, self.dp_min))
+        require(
+            self.reference_speed > 0 and self.max_lag > 0,
+            f"{key}.reference_speed/max_lag",
+            "must be > 0",
+            (self.reference_speed, self.max_lag),
+        )
+        require(
+            len(self.scales) > 0 and all(0 < s <= 1 for s in self.scales),
+            f"{key}.scales",
+            "need values in (0, 1]",
+            self.scales,
+        )
+        require(
+            self.n_dead >= 1 and self.dp_min > 0,
+            f"{key}.n_dead/dp_min",
+            "must be >= 1 and > 0",
+            (self.n_dead, self.dp_min),
+        )
         for k, f in enumerate(self.faults):
             require(f.kind in FAULT_KINDS, f"{key}.faults[{k}].kind", f"must be one of {list(FAULT_KINDS)}", f.kind)
-            require(f.start >= 0 and (f.end is None or f.end > f.start), f"{key}.faults[{k}]",
-                    "needs start >= 0 and end > start (or end: null)", (f.start, f.end))
+            require(
+                f.start >= 0 and (f.end is None or f.end > f.start),
+                f"{key}.faults[{k}]",
+                "needs start >= 0 and end > start (or end: null)",
+                (f.start, f.end),
+            )
 
 
 def grid_slots(m: int, across: int, spacing: float) -> np.ndarray:
@@ -154,7 +194,9 @@ class ZhuController(Controller):
         super().reset(team)
         cfg, spec = self.cfg, team.scenario.spec
         for k, f in enumerate(cfg.faults):
-            require(0 <= f.robot < self.n, f"method.faults[{k}].robot", f"must be a robot index in [0, {self.n})", f.robot)
+            require(
+                0 <= f.robot < self.n, f"method.faults[{k}].robot", f"must be a robot index in [0, {self.n})", f.robot
+            )
         self.radius, self.speed = spec.robot.radius, spec.robot.max_speed
         self.formation, self.spacing, self.angle = spec.team.formation, spec.team.spacing, spec.team.angle_deg
         self.static = capsule_arrays(team.scenario)
@@ -237,8 +279,11 @@ class ZhuController(Controller):
         if len(self.mover_radius) == 0:
             return a, b, r
         m = obs.movers[: len(self.mover_radius)]
-        return (np.concatenate([a, m[:, :2]]), np.concatenate([b, m[:, :2] + self.cfg.horizon * m[:, 2:]]),
-                np.concatenate([r, self.mover_radius]))
+        return (
+            np.concatenate([a, m[:, :2]]),
+            np.concatenate([b, m[:, :2] + self.cfg.horizon * m[:, 2:]]),
+            np.concatenate([r, self.mover_radius]),
+        )
 
     def grow_regions(self, obs: Observation) -> list[Region]:
         """Every robot's P_i (Algorithm 1, step 2)."""
@@ -248,8 +293,11 @@ class ZhuController(Controller):
         ahead /= np.maximum(np.linalg.norm(ahead, axis=1, keepdims=True), 1e-9)
         # once p_r has reached the goal there is no "ahead" left: the teams regroup round it in whole discs
         behind = math.inf if self.s_ref >= self.cum[-1] - 1e-9 else self.cfg.behind
-        return regions_from_halfplanes(grow_halfplanes(obs.position, a, b, r, self.cfg.visibility, self.radius, ahead,
-                                                       behind, self.cfg.visibility_sides))
+        return regions_from_halfplanes(
+            grow_halfplanes(
+                obs.position, a, b, r, self.cfg.visibility, self.radius, ahead, behind, self.cfg.visibility_sides
+            )
+        )
 
     # ---- one step ------------------------------------------------------------------------------------------------
 
@@ -278,8 +326,11 @@ class ZhuController(Controller):
             with self._timed("formation_control"):
                 self._formation_control(p)
             if decided:  # the teams' common regions, for `stafpipe plot regions` (Zhu Fig. 4), to the centimetre
-                self.emit("regions", list(range(self.n)), json.dumps(
-                    {str(k): np.round(r.vertices, 2).tolist() for k, r in self.common.items()}))
+                self.emit(
+                    "regions",
+                    list(range(self.n)),
+                    json.dumps({str(k): np.round(r.vertices, 2).tolist() for k, r in self.common.items()}),
+                )
         v = cfg.gain * (self._targets - p)
         speed = np.linalg.norm(v, axis=1, keepdims=True)
         v *= np.minimum(1.0, self.speed / np.maximum(speed, 1e-9))
@@ -347,8 +398,12 @@ class ZhuController(Controller):
                 self.teams[k] = groups[0]
                 for g in groups[1:]:
                     self._new_team(g)
-                self.emit("split", sorted(members), f"A_a min {a[~np.eye(len(a), dtype=bool)].min():.2f} < "
-                          f"V_min {self.v_min(len(members)):.2f}; parts {groups}")
+                self.emit(
+                    "split",
+                    sorted(members),
+                    f"A_a min {a[~np.eye(len(a), dtype=bool)].min():.2f} < "
+                    f"V_min {self.v_min(len(members)):.2f}; parts {groups}",
+                )
         self._sync_subteams()
         with self._timed("merge_decision"):
             self._merge(p, comm)
@@ -391,10 +446,13 @@ class ZhuController(Controller):
         ref, heading = self.reference()
         at_end = self.s_ref >= self.cum[-1] - 1e-9
         ids = list(self.teams)
-        self.common = dict(zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True))
+        self.common = dict(
+            zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True)
+        )
         room = self._clear_of_other_teams(p) if len(ids) > 1 else {}
         for k, members in self.teams.items():
             region = intersect_all([[self.common[k], room[k]]])[0] if k in room else self.common[k]
+            slots: np.ndarray | None
             if at_end and len(members) == self.n:  # the whole team is back: take the goal formation (its own slots)
                 slots = self.goal
             else:
@@ -415,8 +473,15 @@ class ZhuController(Controller):
             others = np.setdiff1d(np.arange(self.n), members)
             discs = np.concatenate([p[others], self._targets[others]])
             r = np.full(len(discs), self.radius + 0.1)
-            rows += grow_halfplanes(p[members].mean(axis=0)[None], discs, discs, r, self.cfg.visibility, self.radius,
-                                    sides=self.cfg.visibility_sides)
+            rows += grow_halfplanes(
+                p[members].mean(axis=0)[None],
+                discs,
+                discs,
+                r,
+                self.cfg.visibility,
+                self.radius,
+                sides=self.cfg.visibility_sides,
+            )
         return dict(zip(self.teams, regions_from_halfplanes(rows), strict=True))
 
     def _fit(self, k: int, region: Region, m: int, ref: np.ndarray, heading: float) -> np.ndarray | None:
@@ -425,8 +490,12 @@ class ZhuController(Controller):
         finite set of candidates)."""
         rot = rotation(heading)
         min_scale = (2 * self.radius + 0.1) / self.spacing
-        options = [(rank, scale, scale * shape @ rot.T, scale * self._hull(shape) @ rot.T)
-                   for rank, shape in enumerate(self.shapes(m)) for scale in self.cfg.scales if m == 1 or scale >= min_scale]
+        options = [
+            (rank, scale, scale * shape @ rot.T, scale * self._hull(shape) @ rot.T)
+            for rank, shape in enumerate(self.shapes(m))
+            for scale in self.cfg.scales
+            if m == 1 or scale >= min_scale
+        ]
         centres = fit_centres(region, [hull for *_, hull in options], ref)
         best, best_cost, choice = None, math.inf, None
         previous = self._choice.get(k)

@@ -56,15 +56,18 @@ def spectral_partition(a: np.ndarray, k: int) -> np.ndarray:
 def split_team(a: np.ndarray, v_min_of: dict[int, float], max_parts: int) -> np.ndarray:
     """Algorithm 1, step 10, `graph partition(A_a)`: the paper does not say how many parts. We take the fewest parts
     k >= 2 (up to `max_parts`) after which no part needs to split again (every pair inside a part has A_a >= V_min of
-    that part's size; a single robot always fits); failing that, `max_parts`. `v_min_of[size]` is V_min per team size."""
+    that part's size; a single robot always fits); failing that, `max_parts`. `v_min_of[size]` is V_min per team
+    size."""
     m = len(a)
     labels = np.zeros(m, dtype=int)
     for k in range(2, min(max_parts, m) + 1):
         labels = spectral_partition(a, k)
         if len(set(labels.tolist())) < k:
             continue
-        if all(len(idx := np.flatnonzero(labels == g)) < 2 or not needs_split(a[np.ix_(idx, idx)], v_min_of[len(idx)])
-               for g in range(k)):
+        if all(
+            len(idx := np.flatnonzero(labels == g)) < 2 or not needs_split(a[np.ix_(idx, idx)], v_min_of[len(idx)])
+            for g in range(k)
+        ):
             return labels
     return labels
 
@@ -79,14 +82,17 @@ def comm_components(comm: np.ndarray, members: list[int]) -> list[list[int]]:
     return sorted(groups, key=lambda g: (-len(g), min(g)))
 
 
-def merge_candidate(centre_k: np.ndarray, centre_l: np.ndarray, common_kl: Region, p_max: float, v_min: float,
-                    in_range: bool) -> bool:
+def merge_candidate(
+    centre_k: np.ndarray, centre_l: np.ndarray, common_kl: Region, p_max: float, v_min: float, in_range: bool
+) -> bool:
     """Section IV-C, the three conditions to merge sub-formations k and l: ||p_c^k - p_c^l|| <= p_max,
     V(P^k ∩ P^l) >= V_min, and some robot of k within communication range of some robot of l."""
     return bool(in_range and np.linalg.norm(centre_k - centre_l) <= p_max and common_kl.area >= v_min)
 
 
-def merge_requests(teams: dict[int, list[int]], comm: np.ndarray, candidates: dict[tuple[int, int], float]) -> dict[int, int]:
+def merge_requests(
+    teams: dict[int, list[int]], comm: np.ndarray, candidates: dict[tuple[int, int], float]
+) -> dict[int, int]:
     """Algorithm 2: which team each team asks to merge with (0 rounds of consensus needed when it has none).
 
     `candidates[(k, l)] = V(P^k ∩ P^l)` for every ordered pair meeting the merge conditions. Steps 1-9: robot i of team
@@ -98,7 +104,7 @@ def merge_requests(teams: dict[int, list[int]], comm: np.ndarray, candidates: di
     for k, members in teams.items():
         choice = {}
         for i in members:
-            heard = {team_of[j] for j in np.flatnonzero(comm[i]) if j in team_of and team_of[j] != k}
+            heard = {team_of[j] for j in map(int, np.flatnonzero(comm[i])) if j in team_of and team_of[j] != k}
             options = [(candidates[(k, l)], -l) for l in heard if (k, l) in candidates]
             choice[i] = max(options) if options else (-np.inf, 0)
         for _ in range(max(len(members) - 1, 0)):  # d_k <= |I^k| - 1 rounds

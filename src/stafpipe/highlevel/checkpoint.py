@@ -31,12 +31,18 @@ def shipped_path() -> Path:
 
 def save_checkpoint(path: Path, model: DeepGraphCut, made_by: dict[str, Any]) -> Path:
     """Write atomically: a killed save never leaves a half-written checkpoint."""
-    payload = {"format": FORMAT, "high": dataclasses.asdict(model.cfg), "state_dict": model.state_dict(),
-               "made_by": made_by}
+    payload = {
+        "format": FORMAT,
+        "high": dataclasses.asdict(model.cfg),
+        "state_dict": model.state_dict(),
+        "made_by": made_by,
+    }
     return save_payload(Path(path), payload)
 
 
-def load_checkpoint(path: str | Path = "", overrides: HighLevelConfig | None = None) -> tuple[DeepGraphCut, dict[str, Any]]:
+def load_checkpoint(
+    path: str | Path = "", overrides: HighLevelConfig | None = None
+) -> tuple[DeepGraphCut, dict[str, Any]]:
     """The network of a checkpoint (the shipped one when `path` is empty), in eval mode, and its `made_by` record.
 
     The architecture comes from the checkpoint; `overrides` only supplies inference settings (m, safe_gap, checkpoint).

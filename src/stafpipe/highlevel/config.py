@@ -18,7 +18,8 @@ class HighLevelConfig:
     """STAF's high level: the graph-cut network and how it is used (section `high`)."""
 
     features: list[str] = field(default_factory=lambda: ["pos", "goal", "heading"])
-    """Node features (stafpipe.highlevel.graphs.NODE_FEATURES). The paper projects p_i only (W^v 2 x 32); see method.md."""
+    """Node features (stafpipe.highlevel.graphs.NODE_FEATURES). The paper projects p_i only (W^v 2 x 32); see
+    method.md."""
     hidden: int = 32
     """Width of W^v, W^a, W^h (Appendix C: 32)."""
     layers: int = 3
@@ -32,7 +33,8 @@ class HighLevelConfig:
     radius: float = 2.0
     """Edge radius of the team graph, metres (Appendix C: 2 m)."""
     m: str = "auto"
-    """Subteams at inference: `auto` (smallest m whose subteams fit the narrowest passage, docs/method.md) or a number."""
+    """Subteams at inference: `auto` (smallest m whose subteams fit the narrowest passage, docs/method.md) or a
+    number."""
     safe_gap: float = 0.3
     """For m=auto: the free gap (m) kept between neighbouring robots of a subteam at its tightest (docs/method.md)."""
     checkpoint: str = ""
@@ -42,13 +44,23 @@ class HighLevelConfig:
         for f in self.features:
             require(f in NODE_FEATURES, f"{key}.features", f"entries must be in {list(NODE_FEATURES)}", f)
         require(len(self.features) > 0, f"{key}.features", "must not be empty", self.features)
-        require(self.hidden > 0 and self.layers > 0 and self.heads > 0, f"{key}.hidden/layers/heads", "must be > 0",
-                (self.hidden, self.layers, self.heads))
-        require(self.attention in ("relu", "leaky_relu"), f"{key}.attention", "must be relu or leaky_relu", self.attention)
+        require(
+            self.hidden > 0 and self.layers > 0 and self.heads > 0,
+            f"{key}.hidden/layers/heads",
+            "must be > 0",
+            (self.hidden, self.layers, self.heads),
+        )
+        require(
+            self.attention in ("relu", "leaky_relu"), f"{key}.attention", "must be relu or leaky_relu", self.attention
+        )
         require(self.m_max >= 2, f"{key}.m_max", "must be >= 2", self.m_max)
         require(self.radius > 0, f"{key}.radius", "must be > 0", self.radius)
-        require(self.m == "auto" or (self.m.isdigit() and int(self.m) >= 1), f"{key}.m", "must be `auto` or an integer >= 1",
-                self.m)
+        require(
+            self.m == "auto" or (self.m.isdigit() and int(self.m) >= 1),
+            f"{key}.m",
+            "must be `auto` or an integer >= 1",
+            self.m,
+        )
         if self.m != "auto":
             require(int(self.m) <= self.m_max, f"{key}.m", f"must be <= high.m_max ({self.m_max})", self.m)
         require(self.safe_gap >= 0, f"{key}.safe_gap", "must be >= 0", self.safe_gap)
@@ -93,8 +105,12 @@ class TrainHighConfig:
         require(self.batch_size >= 1, f"{key}.batch_size", "must be >= 1", self.batch_size)
         require(self.lr > 0, f"{key}.lr", "must be > 0", self.lr)
         require(0 <= self.val_fraction < 1, f"{key}.val_fraction", "must be in [0, 1)", self.val_fraction)
-        require(len(self.m_choices) > 0 and all(m >= 2 for m in self.m_choices), f"{key}.m_choices",
-                "must be a non-empty list of integers >= 2", list(self.m_choices))
+        require(
+            len(self.m_choices) > 0 and all(m >= 2 for m in self.m_choices),
+            f"{key}.m_choices",
+            "must be a non-empty list of integers >= 2",
+            list(self.m_choices),
+        )
         require(self.threads >= 1, f"{key}.threads", "must be >= 1", self.threads)
         self.loss.check(f"{key}.loss")
 
@@ -149,10 +165,16 @@ class AblateConfig:
         require(self.n >= 3 and 2 <= self.m < self.n, f"{key}.n/m", "need n >= 3 and 2 <= m < n", (self.n, self.m))
         for v in self.variants:
             require(v in LOSS_VARIANTS, f"{key}.variants", f"entries must be in {list(LOSS_VARIANTS)}", v)
-        require(self.train_instances >= 1 and self.epochs >= 1, f"{key}.train_instances/epochs", "must be >= 1",
-                (self.train_instances, self.epochs))
+        require(
+            self.train_instances >= 1 and self.epochs >= 1,
+            f"{key}.train_instances/epochs",
+            "must be >= 1",
+            (self.train_instances, self.epochs),
+        )
         require(all(m >= 2 for m in self.m_values), f"{key}.m_values", "must be >= 2", list(self.m_values))
-        require(self.team_size > max(self.m_values, default=2), f"{key}.team_size", "must exceed every m", self.team_size)
+        require(
+            self.team_size > max(self.m_values, default=2), f"{key}.team_size", "must exceed every m", self.team_size
+        )
         require(all(s >= 0 for s in self.noise_sigmas), f"{key}.noise_sigmas", "must be >= 0", list(self.noise_sigmas))
         require(2 <= self.noise_m < self.n, f"{key}.noise_m", f"must be in [2, ablate.n = {self.n})", self.noise_m)
         for kind in [self.formation, *self.formations]:

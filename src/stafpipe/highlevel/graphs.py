@@ -17,6 +17,7 @@ from scipy.spatial import cKDTree
 
 from stafpipe.highlevel.config import NODE_FEATURES
 
+
 @dataclass
 class Team:
     """One team: start positions (n, 2), goals (n, 2), velocities (n, 2) and the number of subteams wanted."""
@@ -51,7 +52,8 @@ class TeamBatch(NamedTuple):
 
 
 def radius_edges(pos: np.ndarray, radius: float) -> np.ndarray:
-    """(2, E) directed edges between robots closer than `radius` (STAF's a_ij = 1), a KD-tree query (scales to 1,000s)."""
+    """(2, E) directed edges between robots closer than `radius` (STAF's a_ij = 1), a KD-tree query (scales to
+    1,000s)."""
     pairs = cKDTree(pos).query_pairs(radius, output_type="ndarray")
     if len(pairs) == 0:
         return np.zeros((2, 0), dtype=np.int64)
@@ -112,7 +114,7 @@ def make_batch(teams: Sequence[Team], features: Sequence[str], radius: float) ->
     return collate([team_graph(t, features, radius) for t in teams], [t.m for t in teams])
 
 
-def teams_from_frame(df, m: int | Sequence[int], rng: np.random.Generator | None = None) -> list[Team]:  # noqa: ANN001
+def teams_from_frame(df, m: int | Sequence[int], rng: np.random.Generator | None = None) -> list[Team]:
     """Teams of a `stafpipe generate` table (docs/data.md); `m` fixed, or drawn per team from a list with `rng`."""
     teams = []
     for _, g in df.sort_values(["instance", "robot"]).groupby("instance", sort=True):

@@ -12,7 +12,6 @@ from stafpipe.highlevel.graphs import Team, TeamGraph, collate, team_graph
 from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut
 from stafpipe.highlevel.partition import choose_m, hard_assignment
 
-
 SMALL_TEAM = 64
 """A single team up to this size is decided by the numpy forward pass (same output, a fraction of the time)."""
 
@@ -23,12 +22,17 @@ def predict(model: DeepGraphCut, teams: Sequence[Team]) -> list[np.ndarray]:
     return _predict(model, teams, [team_graph(t, cfg.features, cfg.radius) for t in teams])
 
 
-def _predict(model: DeepGraphCut, teams: Sequence[Team], graphs: list[TeamGraph],
-             fast: NumpyGraphCut | None = None) -> list[np.ndarray]:
+def _predict(
+    model: DeepGraphCut, teams: Sequence[Team], graphs: list[TeamGraph], fast: NumpyGraphCut | None = None
+) -> list[np.ndarray]:
     """`fast`: the model's numpy copy when the caller keeps one (the weights are copied per call otherwise)."""
     cfg = model.cfg
     if len(teams) == 1 and teams[0].n <= SMALL_TEAM:
-        return [(fast if fast is not None else NumpyGraphCut(model))(graphs[0].x, graphs[0].edges, min(teams[0].m, cfg.m_max))]
+        return [
+            (fast if fast is not None else NumpyGraphCut(model))(
+                graphs[0].x, graphs[0].edges, min(teams[0].m, cfg.m_max)
+            )
+        ]
     with torch.no_grad():
         y = model(collate(graphs, [min(t.m, cfg.m_max) for t in teams])).numpy()
     bounds = np.cumsum([0] + [t.n for t in teams])
@@ -36,7 +40,8 @@ def _predict(model: DeepGraphCut, teams: Sequence[Team], graphs: list[TeamGraph]
 
 
 def divide(model: DeepGraphCut, teams: Sequence[Team], fast: NumpyGraphCut | None = None) -> list[np.ndarray]:
-    """Subteam label (0 .. m-1) of every robot of each team: argmax of Y, repaired (non-empty, connected where possible)."""
+    """Subteam label (0 .. m-1) of every robot of each team: argmax of Y, repaired (non-empty, connected where
+    possible)."""
     cfg = model.cfg
     graphs = [team_graph(t, cfg.features, cfg.radius) for t in teams]
     out = []
@@ -48,8 +53,9 @@ def divide(model: DeepGraphCut, teams: Sequence[Team], fast: NumpyGraphCut | Non
     return out
 
 
-def subteams_wanted(cfg: HighLevelConfig, kind: str, n: int, eta: float, robot_radius: float,
-                    angle_deg: float = 90.0) -> int:
+def subteams_wanted(
+    cfg: HighLevelConfig, kind: str, n: int, eta: float, robot_radius: float, angle_deg: float = 90.0
+) -> int:
     """`high.m`: a fixed number, or with `auto` the smallest m whose subteams fit the passage width eta."""
     if cfg.m != "auto":
         return min(int(cfg.m), max(1, n - 1))

@@ -1,8 +1,10 @@
 """STAF's unsupervised subteaming loss, Eq. (1) (STAF, Section 3), per team of a batch.
 
-  L_st = Y(1 - Y)^T E  +  sum_j (sum_i y_ij - n/m)  +  sum_j || sum_i y_ij p_i / sum_i y_ij - sum_i y_ij g_i / sum_i y_ij ||
+  L_st = Y(1 - Y)^T E  +  sum_j (sum_i y_ij - n/m)  +  sum_j || sum_i y_ij p_i / sum_i y_ij - sum_i y_ij g_i / sum_i
+  y_ij ||
 
-As printed, the first term is an n x n matrix and the second is identically 0 for softmax rows; docs/method.md writes the
+As printed, the first term is an n x n matrix and the second is identically 0 for softmax rows; docs/method.md writes
+the
 printed and the used form side by side. Used (each term scaled to be comparable across team sizes):
   adjacency  trace(Y (1 - Y)^T E) / sum(E): the expected fraction of radius-graph edges cut
   balance    sum_{j<m} (sum_i y_ij - n/m)^2 / (n^2 (m - 1) / m): 0 when balanced, 1 with everyone in one subteam
@@ -36,7 +38,8 @@ def loss_terms(y: torch.Tensor, batch: TeamBatch) -> dict[str, torch.Tensor]:
     n = batch.sizes.float()
     m = batch.m.float()
     src, dst = batch.edges
-    # adjacency: [Y (1 - Y)^T]_ik = sum_j y_ij (1 - y_kj) = 1 - sum_j y_ij y_kj for softmax rows (pair in different subteams)
+    # adjacency: [Y (1 - Y)^T]_ik = sum_j y_ij (1 - y_kj) = 1 - sum_j y_ij y_kj for softmax rows (pair in different
+    # subteams)
     cut = 1.0 - (y[src] * y[dst]).sum(dim=1)
     edge_team = batch.team[dst]
     cut_sum = torch.zeros(t).index_add_(0, edge_team, cut)

@@ -5,7 +5,8 @@ Embedding omega (a graph attention network, [54] = GAT):
   alpha_ij = softmax_{j in N(i)} ReLU(a^T [W^a m_i || W^a m_j])   (Section 3; printed without `a`, see docs/method.md)
   h_i = W^h m_i + sum_{j in N(i)} alpha_ij W^h m_j       (Section 3; Appendix C: W^a, W^h are 32 x 32, three layers)
   with several heads per layer, averaged (the "multi-head mechanism [54]").
-Classifier tau: two linear layers and a softmax -> Y (n x m) (Section 3). Ours also sees m (one-hot), so that one network
+Classifier tau: two linear layers and a softmax -> Y (n x m) (Section 3). Ours also sees m (one-hot), so that one
+network
 serves every m up to `m_max`; logits of subteams >= m are masked out.
 """
 
@@ -23,7 +24,8 @@ def scatter_softmax(scores: torch.Tensor, index: torch.Tensor, size: int) -> tor
     """Softmax of `scores` (E, H) over the entries that share an `index` (E,) (the neighbours of one node)."""
     idx = index[:, None].expand_as(scores)
     peak = torch.full((size, scores.shape[1]), -torch.inf, dtype=scores.dtype).scatter_reduce(
-        0, idx, scores, reduce="amax", include_self=True)
+        0, idx, scores, reduce="amax", include_self=True
+    )
     e = torch.exp(scores - peak[index])
     total = torch.zeros((size, scores.shape[1]), dtype=scores.dtype).index_add_(0, index, e)
     return e / total[index]
@@ -64,7 +66,8 @@ class DeepGraphCut(nn.Module):
         self.w_v = nn.Linear(in_dim, cfg.hidden)  # m_i = W^v p_i (Section 3)
         self.layers = nn.ModuleList(AttentionLayer(cfg.hidden, cfg.heads, cfg.attention) for _ in range(cfg.layers))
         self.tau = nn.Sequential(  # two linear layers + softmax (Section 3); m enters as a one-hot
-            nn.Linear(cfg.hidden + cfg.m_max, cfg.hidden), nn.ReLU(), nn.Linear(cfg.hidden, cfg.m_max))
+            nn.Linear(cfg.hidden + cfg.m_max, cfg.hidden), nn.ReLU(), nn.Linear(cfg.hidden, cfg.m_max)
+        )
 
     def embed(self, batch: TeamBatch) -> torch.Tensor:
         """H = omega(G): (N, hidden) node embeddings."""
@@ -87,14 +90,17 @@ class DeepGraphCut(nn.Module):
 
 class NumpyGraphCut:
     """The same forward pass in numpy with dense attention, for deciding one small team fast (torch's per-op overhead
-    dominates below ~100 robots: measured on the 2-core development machine). A test checks it equals DeepGraphCut's output."""
+    dominates below ~100 robots: measured on the 2-core development machine). A test checks it equals DeepGraphCut's
+    output."""
 
     def __init__(self, model: DeepGraphCut):
         self.cfg = model.cfg
         w = {k: v.detach().numpy().astype(np.float64) for k, v in model.state_dict().items()}
         self.w_v, self.b_v = w["w_v.weight"].T, w["w_v.bias"]
-        self.layers = [(w[f"layers.{k}.w_a.weight"].T, w[f"layers.{k}.a"], w[f"layers.{k}.w_h.weight"].T)
-                       for k in range(self.cfg.layers)]
+        self.layers = [
+            (w[f"layers.{k}.w_a.weight"].T, w[f"layers.{k}.a"], w[f"layers.{k}.w_h.weight"].T)
+            for k in range(self.cfg.layers)
+        ]
         self.tau = (w["tau.0.weight"].T, w["tau.0.bias"], w["tau.2.weight"].T, w["tau.2.bias"])
 
     def __call__(self, x: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
@@ -108,7 +114,9 @@ class NumpyGraphCut:
             s_i = np.einsum("nhw,hw->hn", wa, a[:, :width])
             s_j = np.einsum("nhw,hw->hn", wa, a[:, width:])
             scores = s_i[:, :, None] + s_j[:, None, :]  # (H, i, j)
-            scores = np.maximum(scores, 0.0) if self.cfg.attention == "relu" else np.where(scores > 0, scores, 0.2 * scores)
+            scores = (
+                np.maximum(scores, 0.0) if self.cfg.attention == "relu" else np.where(scores > 0, scores, 0.2 * scores)
+            )
             scores = np.where(adj[None], scores, -np.inf)
             peak = scores.max(axis=2, keepdims=True)
             e = np.exp(scores - np.where(np.isfinite(peak), peak, 0.0))

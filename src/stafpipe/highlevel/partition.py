@@ -15,7 +15,8 @@ from stafpipe.formations import formation_slots
 
 
 def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """Component id of every robot in the graph of edges that stay inside a subteam (one scipy call for all subteams)."""
+    """Component id of every robot in the graph of edges that stay inside a subteam (one scipy call for all
+    subteams)."""
     n = len(labels)
     inside = labels[edges[0]] == labels[edges[1]]
     if n <= 64:  # small teams: transitive closure by repeated squaring beats scipy's setup cost
@@ -77,8 +78,9 @@ def formation_width(kind: str, k: int, spacing: float, robot_radius: float, angl
     return float(slots[:, 1].max() - slots[:, 1].min()) + 2 * robot_radius
 
 
-def choose_m(kind: str, n: int, eta: float, robot_radius: float, safe_gap: float, m_max: int,
-             angle_deg: float = 90.0) -> tuple[int, bool]:
+def choose_m(
+    kind: str, n: int, eta: float, robot_radius: float, safe_gap: float, m_max: int, angle_deg: float = 90.0
+) -> tuple[int, bool]:
     """Adaptive number of subteams (STAF Section 7, limitation 3): the smallest m such that a subteam of ceil(n/m)
     robots in the team's formation, at its tightest safe spacing (2 r + safe_gap), fits the passage width eta.
 
@@ -91,13 +93,19 @@ def choose_m(kind: str, n: int, eta: float, robot_radius: float, safe_gap: float
     return max(1, min(m_max, n)), False
 
 
-def partition_stats(labels: np.ndarray, pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: int) -> dict[str, float]:
+def partition_stats(
+    labels: np.ndarray, pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: int
+) -> dict[str, float]:
     """What a partition is judged by: sizes, cut edges, subteam-goal distance (as in loss.py), connectivity."""
     n = len(labels)
     sizes = np.bincount(labels, minlength=m)[:m]
     cut = float((labels[edges[0]] != labels[edges[1]]).mean()) if edges.shape[1] else 0.0
     d_team = max(float(np.linalg.norm(pos.mean(0) - goal.mean(0))), 1e-9)
-    gaps = [sizes[j] / n * np.linalg.norm(pos[labels == j].mean(0) - goal[labels == j].mean(0)) for j in range(m) if sizes[j]]
+    gaps = [
+        sizes[j] / n * np.linalg.norm(pos[labels == j].mean(0) - goal[labels == j].mean(0))
+        for j in range(m)
+        if sizes[j]
+    ]
     part = _subteam_parts(labels, edges)
     connected = all(len(np.unique(part[labels == j])) <= 1 for j in range(m))
     return {
@@ -112,7 +120,9 @@ def partition_stats(labels: np.ndarray, pos: np.ndarray, goal: np.ndarray, edges
     }
 
 
-def spectral_partition(pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: int, radius: float, seed: int) -> np.ndarray:
+def spectral_partition(
+    pos: np.ndarray, goal: np.ndarray, edges: np.ndarray, m: int, radius: float, seed: int
+) -> np.ndarray:
     """Spectral clustering (scikit-learn) of the radius graph weighted by start and goal proximity."""
     n = len(pos)
     if m <= 1:

@@ -45,21 +45,35 @@ def summarise(df: pd.DataFrame, by: list[str]) -> pd.DataFrame:
         for c in value_cols:
             x = g[c].to_numpy(float)
             row[c] = float(x.mean())
-            row[f"{c}_ci95"] = float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))) if len(x) > 1 else math.nan
+            row[f"{c}_ci95"] = (
+                float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x))) if len(x) > 1 else math.nan
+            )
         row["teams"] = len(g)
         rows.append(row)
     return pd.DataFrame(rows)
 
 
-def _rows(partitions: list[np.ndarray], teams: list[Team], subteams: int, radius: float,
-          **keys: Any) -> list[dict[str, Any]]:
-    return [{**keys, "team": k, **partition_stats(lab, t.pos, t.goal, radius_edges(t.pos, radius), subteams)}
-            for k, (lab, t) in enumerate(zip(partitions, teams, strict=True))]
+def _rows(
+    partitions: list[np.ndarray], teams: list[Team], subteams: int, radius: float, **keys: Any
+) -> list[dict[str, Any]]:
+    return [
+        {**keys, "team": k, **partition_stats(lab, t.pos, t.goal, radius_edges(t.pos, radius), subteams)}
+        for k, (lab, t) in enumerate(zip(partitions, teams, strict=True))
+    ]
 
 
 def _example(team: Team, labels: np.ndarray, panel: str) -> pd.DataFrame:
-    return pd.DataFrame({"panel": panel, "robot": np.arange(team.n), "x": team.pos[:, 0], "y": team.pos[:, 1],
-                         "goal_x": team.goal[:, 0], "goal_y": team.goal[:, 1], "subteam": labels})
+    return pd.DataFrame(
+        {
+            "panel": panel,
+            "robot": np.arange(team.n),
+            "x": team.pos[:, 0],
+            "y": team.pos[:, 1],
+            "goal_x": team.goal[:, 0],
+            "goal_y": team.goal[:, 1],
+            "subteam": labels,
+        }
+    )
 
 
 def raw_labels(model: DeepGraphCut, teams: list[Team]) -> list[np.ndarray]:
@@ -67,8 +81,9 @@ def raw_labels(model: DeepGraphCut, teams: list[Team]) -> list[np.ndarray]:
     return [y[:, : t.m].argmax(axis=1) for t, y in zip(teams, predict(model, teams), strict=True)]
 
 
-def loss_terms_study(ab: AblateConfig, high: HighLevelConfig, tc: TrainHighConfig, seed: int, out_dir: Path,
-                     config_hash: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+def loss_terms_study(
+    ab: AblateConfig, high: HighLevelConfig, tc: TrainHighConfig, seed: int, out_dir: Path, config_hash: str
+) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Train one network per loss variant on n-robot teams, judge each on the same test teams (raw and repaired)."""
     from stafpipe.highlevel.training import train
 
@@ -80,8 +95,15 @@ def loss_terms_study(ab: AblateConfig, high: HighLevelConfig, tc: TrainHighConfi
         weights = LOSS_VARIANTS[variant]
         loss = tc.loss if weights is None else LossWeights(*weights)
         tcv = dataclasses.replace(tc, epochs=ab.epochs, m_choices=[ab.m], loss=loss, val_fraction=0.0)
-        model, _ = train(graphs, high, tcv, seed, out_dir / "variants" / variant, f"{config_hash}/{variant}",
-                         {"study": "loss_terms", "variant": variant})
+        model, _ = train(
+            graphs,
+            high,
+            tcv,
+            seed,
+            out_dir / "variants" / variant,
+            f"{config_hash}/{variant}",
+            {"study": "loss_terms", "variant": variant},
+        )
         raw = raw_labels(model, test)
         rows += _rows(raw, test, ab.m, high.radius, variant=variant, labels="raw")
         rows += _rows(divide(model, test), test, ab.m, high.radius, variant=variant, labels="repaired")
@@ -121,8 +143,9 @@ def classical_study(model: DeepGraphCut, ab: AblateConfig, seed: int) -> tuple[p
     radius = model.cfg.radius
     methods = {
         "learned": lambda teams, m: divide(model, teams),
-        "spectral": lambda teams, m: [spectral_partition(t.pos, t.goal, radius_edges(t.pos, radius), m, radius, seed)
-                                      for t in teams],
+        "spectral": lambda teams, m: [
+            spectral_partition(t.pos, t.goal, radius_edges(t.pos, radius), m, radius, seed) for t in teams
+        ],
         "balanced_kmeans": lambda teams, m: [balanced_kmeans(t.pos, t.goal, m, seed) for t in teams],
     }
     rows, examples = [], []
@@ -133,7 +156,9 @@ def classical_study(model: DeepGraphCut, ab: AblateConfig, seed: int) -> tuple[p
                 start = time.perf_counter()
                 labels = fn(teams, m)
                 ms = 1000 * (time.perf_counter() - start) / len(teams)
-                rows += [{**r, "ms_per_team": ms} for r in _rows(labels, teams, m, radius, formation=kind, m=m, method=name)]
+                rows += [
+                    {**r, "ms_per_team": ms} for r in _rows(labels, teams, m, radius, formation=kind, m=m, method=name)
+                ]
                 if m == ab.m_values[0]:
                     examples.append(_example(teams[0], labels[0], f"{kind}, {name}"))
     return pd.DataFrame(rows), pd.concat(examples, ignore_index=True)
@@ -142,29 +167,44 @@ def classical_study(model: DeepGraphCut, ab: AblateConfig, seed: int) -> tuple[p
 FINDINGS = [  # STAF Section 5 on Fig. 7, as checks on the raw (unrepaired) partitions' means
     ("a_balance_only", "splits evenly", lambda s, full: s["imbalance"] <= 1.0),
     ("b_adjacency_only", "puts everyone in one subteam", lambda s, full: s["subteams_used"] <= 1.1),
-    ("c_goal_only", "aligns subteams with goals (goal distance < full's)",
-     lambda s, full: s["goal_distance"] < full["goal_distance"] - 1e-3),
+    (
+        "c_goal_only",
+        "aligns subteams with goals (goal distance < full's)",
+        lambda s, full: s["goal_distance"] < full["goal_distance"] - 1e-3,
+    ),
     ("d_without_balance", "is unbalanced (imbalance > full's)", lambda s, full: s["imbalance"] > full["imbalance"]),
-    ("e_without_adjacency", "is not compact (cut fraction > full's)",
-     lambda s, full: s["cut_fraction"] > full["cut_fraction"]),
-    ("f_without_goal", "is misaligned with goals (goal distance > full's)",
-     lambda s, full: s["goal_distance"] > full["goal_distance"] + 1e-3),
+    (
+        "e_without_adjacency",
+        "is not compact (cut fraction > full's)",
+        lambda s, full: s["cut_fraction"] > full["cut_fraction"],
+    ),
+    (
+        "f_without_goal",
+        "is misaligned with goals (goal distance > full's)",
+        lambda s, full: s["goal_distance"] > full["goal_distance"] + 1e-3,
+    ),
 ]
 
 
 def findings_markdown(summary: pd.DataFrame) -> str:
     """The paper's qualitative findings on Fig. 7 checked against our numbers, as a Markdown table."""
     raw = summary[summary["labels"] == "raw"].set_index("variant")
-    lines = ["| variant | the paper says it | holds here? | imbalance | subteams used | cut fraction | goal distance |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| variant | the paper says it | holds here? | imbalance | subteams used | cut fraction | goal distance |",
+        "|---|---|---|---|---|---|---|",
+    ]
     if "full" not in raw.index:
         return "The `full` variant was not run; findings compare against it.\n"
     full = raw.loc["full"]
     for variant, claim, test in FINDINGS:
         if variant in raw.index:
             s = raw.loc[variant]
-            lines.append(f"| {variant} | {claim} | {'yes' if test(s, full) else 'no'} | {s['imbalance']:.2f} | "
-                         f"{s['subteams_used']:.2f} | {s['cut_fraction']:.3f} | {s['goal_distance']:.3f} |")
-    lines.append(f"| full | (reference) | | {full['imbalance']:.2f} | {full['subteams_used']:.2f} | "
-                 f"{full['cut_fraction']:.3f} | {full['goal_distance']:.3f} |")
+            lines.append(
+                f"| {variant} | {claim} | {'yes' if test(s, full) else 'no'} | {s['imbalance']:.2f} | "
+                f"{s['subteams_used']:.2f} | {s['cut_fraction']:.3f} | {s['goal_distance']:.3f} |"
+            )
+    lines.append(
+        f"| full | (reference) | | {full['imbalance']:.2f} | {full['subteams_used']:.2f} | "
+        f"{full['cut_fraction']:.3f} | {full['goal_distance']:.3f} |"
+    )
     return "\n".join(lines) + "\n"

@@ -36,8 +36,9 @@ def _draw_m(rng: np.random.Generator, graphs: list[TeamGraph], choices: list[int
     return [max(1, min(int(choices[rng.integers(len(choices))]), len(g.pos) - 1)) for g in graphs]
 
 
-def evaluate(model: DeepGraphCut, graphs: list[TeamGraph], ms: list[int], w: LossWeights,
-             batch_size: int = 512) -> dict[str, float]:
+def evaluate(
+    model: DeepGraphCut, graphs: list[TeamGraph], ms: list[int], w: LossWeights, batch_size: int = 512
+) -> dict[str, float]:
     """Mean loss terms and weighted total over `graphs` (no gradient)."""
     sums = dict.fromkeys([*TERMS, "total"], 0.0)
     with torch.no_grad():
@@ -50,9 +51,16 @@ def evaluate(model: DeepGraphCut, graphs: list[TeamGraph], ms: list[int], w: Los
     return {k: v / max(len(graphs), 1) for k, v in sums.items()}
 
 
-def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, seed: int, out_dir: Path,
-          config_hash: str, made_by: dict[str, Any], on_epoch: Callable[[dict[str, float]], None] | None = None
-          ) -> tuple[DeepGraphCut, list[dict[str, float]]]:
+def train(
+    graphs: list[TeamGraph],
+    high: HighLevelConfig,
+    tc: TrainHighConfig,
+    seed: int,
+    out_dir: Path,
+    config_hash: str,
+    made_by: dict[str, Any],
+    on_epoch: Callable[[dict[str, float]], None] | None = None,
+) -> tuple[DeepGraphCut, list[dict[str, float]]]:
     """Train on `graphs`; after every epoch the whole state goes to `out_dir/last.pt`, so a rerun of the same config in
     the same directory continues where a killed one stopped and ends with the same weights as an uninterrupted run."""
     torch.set_num_threads(tc.threads)
@@ -77,8 +85,9 @@ def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, s
         else:
             log.warning("%s was made by another config; starting afresh", state_path)
     steps = math.ceil(len(train_set) / tc.batch_size)
-    for epoch in progress(range(start_epoch, tc.epochs), desc="train-high", unit="epoch", initial=start_epoch,
-                          total=tc.epochs):
+    for epoch in progress(
+        range(start_epoch, tc.epochs), desc="train-high", unit="epoch", initial=start_epoch, total=tc.epochs
+    ):
         rng = np.random.default_rng([seed, 2, epoch])  # the epoch's order and m draws depend on (seed, epoch) only
         order = rng.permutation(len(train_set))
         ms = _draw_m(rng, train_set, tc.m_choices)
@@ -100,14 +109,25 @@ def train(graphs: list[TeamGraph], high: HighLevelConfig, tc: TrainHighConfig, s
         if val_set:
             row.update({f"val_{k}": v for k, v in evaluate(model, val_set, val_m, tc.loss).items()})
         history.append(row)
-        state = {"config_hash": config_hash, "epoch": epoch + 1, "model": model.state_dict(),
-                 "optimizer": opt.state_dict(), "history": history}
+        state = {
+            "config_hash": config_hash,
+            "epoch": epoch + 1,
+            "model": model.state_dict(),
+            "optimizer": opt.state_dict(),
+            "history": history,
+        }
         save_payload(state_path, state)
         if on_epoch is not None:
             on_epoch(row)
         after_epoch(epoch + 1)
-    made_by = {**made_by, "train_high": asdict(tc), "seed": seed, "stafpipe_version": __version__, "commit": commit(),
-               "final": history[-1] if history else {}}
+    made_by = {
+        **made_by,
+        "train_high": asdict(tc),
+        "seed": seed,
+        "stafpipe_version": __version__,
+        "commit": commit(),
+        "final": history[-1] if history else {},
+    }
     save_checkpoint(out_dir / "high_level.pt", model, made_by)
     return model, history
 

@@ -13,13 +13,13 @@ import dataclasses
 from typing import ClassVar, NamedTuple
 
 import numpy as np
-from torch import nn
 
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.features import Features, features, guide_targets, staf_features
+from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.learning.staf_net import StafPolicy
 from stafpipe.sensing import Observation
 
@@ -38,7 +38,7 @@ class Adapter:
     """Base adapter: robots aim at their own goal slots; no reward terms of its own."""
 
     name: ClassVar[str] = ""
-    network: ClassVar[type[nn.Module]]
+    network: ClassVar[type[PolicyNet]]
 
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: PlanConfig | None, sensing_radius: float):
         self.policy, self.reward_cfg, self.plan_cfg, self.sensing_radius = policy, reward, plan, sensing_radius
@@ -106,6 +106,7 @@ class StafAdapter(Adapter):
 
     name = "staf"
     network = StafPolicy
+    plan_cfg: PlanConfig  # always set here (the default plan when none is given)
 
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: PlanConfig | None, sensing_radius: float):
         from stafpipe.highlevel.infer import divider
@@ -130,12 +131,20 @@ class StafAdapter(Adapter):
         """`teacher` with `plan.adapt=nominal`: shadow plans with the geometric adaptation run beside the method's
         own: their targets are the imitation teacher's aim (privileged: the network never sees them)."""
         super().begin(teams)
-        self.plans = [StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width,
-                               self.divide) for t in teams]
+        self.plans = [
+            StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)
+            for t in teams
+        ]
         shadow = dataclasses.replace(self.plan_cfg, adapt="geometric")
         privileged = teacher and self.plan_cfg.adapt != "geometric"  # else the teacher's aim is the plan's own
-        self.shadows = [StafPlan(shadow, t.scenario, t.template, t.goal, self._centred(t), t.passage_width,
-                                 self.divide) for t in teams] if privileged else []
+        self.shadows = (
+            [
+                StafPlan(shadow, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)
+                for t in teams
+            ]
+            if privileged
+            else []
+        )
 
     def step(self, obs: Observation, dt: float) -> Step:
         if self.shadows:
@@ -161,8 +170,9 @@ class StafAdapter(Adapter):
         return self.plans[w].drain_events()
 
 
-def staf_penalties(pos: np.ndarray, vel: np.ndarray, obs: Observation, plans: list, rc: RewardConfig,
-                   radius: float) -> np.ndarray:
+def staf_penalties(
+    pos: np.ndarray, vel: np.ndarray, obs: Observation, plans: list, rc: RewardConfig, radius: float
+) -> np.ndarray:
     """(B, n) STAF's formation and proximity terms of this step. R^adp (STAF Sec. 3) over the robot's subteam mates,
     -lambda |d_ij - p_ij| - (1 - lambda) q_ij with d_ij from the plan's formation, averaged over the mates so that
     subteams of any size weigh alike; proximity: linear in how far a gap is below `safe_distance` (docs/staf.md)."""

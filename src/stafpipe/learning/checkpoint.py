@@ -6,17 +6,16 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from torch import nn
-
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.config import PolicyConfig
+from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.paths import package_dir
 from stafpipe.torch_io import load_payload, save_payload
 
 FORMAT = "stafpipe.policy/1"
 
 
-def build_policy(method: str, cfg: PolicyConfig) -> nn.Module:
+def build_policy(method: str, cfg: PolicyConfig) -> PolicyNet:
     """A fresh policy network of the learned method `method` (its adapter names the network)."""
     from stafpipe.learning.adapters import ADAPTERS
 
@@ -31,13 +30,18 @@ def shipped_policy(method: str) -> Path:
     return package_dir() / "checkpoints" / f"{method}.pt"
 
 
-def save_policy(path: Path, method: str, policy: nn.Module, made_by: dict[str, Any]) -> Path:
-    payload = {"format": FORMAT, "method": method, "policy": dataclasses.asdict(policy.cfg),
-               "state_dict": policy.state_dict(), "made_by": made_by}
+def save_policy(path: Path, method: str, policy: PolicyNet, made_by: dict[str, Any]) -> Path:
+    payload = {
+        "format": FORMAT,
+        "method": method,
+        "policy": dataclasses.asdict(policy.cfg),
+        "state_dict": policy.state_dict(),
+        "made_by": made_by,
+    }
     return save_payload(Path(path), payload)
 
 
-def load_policy(path: str | Path, method: str) -> tuple[nn.Module, dict[str, Any]]:
+def load_policy(path: str | Path, method: str) -> tuple[PolicyNet, dict[str, Any]]:
     """The policy of a checkpoint (`path` empty: the one shipped for `method`), in eval mode, and its record."""
     path = Path(path) if path else shipped_policy(method)
     payload = load_payload(path, PolicyCheckpointError, "policy checkpoint", "train one with `stafpipe train-ppo`")

@@ -58,7 +58,8 @@ class PolicyConfig:
     """method=staf: 0 = a_i = psi(f_i) as printed; > 0 adds a proportional step towards the target (gain x target
     vector, at most unit length) to psi's output, which then learns a residual (docs/staf.md)."""
     message: str = "relu"
-    """method=staf: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu` (learning/staf_net.py)."""
+    """method=staf: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu`
+    (learning/staf_net.py)."""
 
 
 @dataclass
@@ -111,7 +112,8 @@ class TrainPPOConfig:
     """Curriculum: ... and one of these team formations (STAF Table 1's three); empty: the scenario's own (or the
     `formation` group's)."""
     team_sizes: list[int] = field(default_factory=list)
-    """Curriculum: ... and each of these team sizes (one size per iteration: a batch shares n); empty: the scenario's."""
+    """Curriculum: ... and each of these team sizes (one size per iteration: a batch shares n); empty: the
+    scenario's."""
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip: float = 0.2
@@ -146,13 +148,21 @@ class TrainPPOConfig:
 
         require(self.method in ADAPTERS, f"{key}.method", f"must be one of {sorted(ADAPTERS)}", self.method)
         im = self.imitation
-        require(im.epochs >= 0 and im.rollouts >= 1 and im.batch >= 1 and im.dagger >= 0, f"{key}.imitation",
-                "epochs >= 0, rollouts >= 1, batch >= 1, dagger >= 0", (im.epochs, im.rollouts, im.batch, im.dagger))
+        require(
+            im.epochs >= 0 and im.rollouts >= 1 and im.batch >= 1 and im.dagger >= 0,
+            f"{key}.imitation",
+            "epochs >= 0, rollouts >= 1, batch >= 1, dagger >= 0",
+            (im.epochs, im.rollouts, im.batch, im.dagger),
+        )
         from stafpipe.learning.teachers import TEACHERS
 
         require(im.teacher in TEACHERS, f"{key}.imitation.teacher", f"must be one of {list(TEACHERS)}", im.teacher)
-        require(im.gain > 0 and im.noise >= 0 and im.lr > 0 and im.near_weight > 0, f"{key}.imitation",
-                "gain > 0, noise >= 0, lr > 0, near_weight > 0", (im.gain, im.noise, im.lr, im.near_weight))
+        require(
+            im.gain > 0 and im.noise >= 0 and im.lr > 0 and im.near_weight > 0,
+            f"{key}.imitation",
+            "gain > 0, noise >= 0, lr > 0, near_weight > 0",
+            (im.gain, im.noise, im.lr, im.near_weight),
+        )
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
@@ -161,16 +171,34 @@ class TrainPPOConfig:
         for n in self.team_sizes:
             require(n >= 2, f"{key}.team_sizes", "entries must be >= 2", n)
         require(len(self.scenarios) > 0, f"{key}.scenarios", "must name at least one scenario", self.scenarios)
-        require(0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1, f"{key}.gamma/gae_lambda", "must be in (0, 1]",
-                (self.gamma, self.gae_lambda))
+        require(
+            0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1,
+            f"{key}.gamma/gae_lambda",
+            "must be in (0, 1]",
+            (self.gamma, self.gae_lambda),
+        )
         require(0 < self.clip < 1, f"{key}.clip", "must be in (0, 1)", self.clip)
         require(self.lr > 0, f"{key}.lr", "must be > 0", self.lr)
-        require(self.worlds * self.episode_steps >= self.minibatches, f"{key}.minibatches",
-                "must not exceed worlds x episode_steps", self.minibatches)
+        require(
+            self.worlds * self.episode_steps >= self.minibatches,
+            f"{key}.minibatches",
+            "must not exceed worlds x episode_steps",
+            self.minibatches,
+        )
         require(self.policy.guide in ("goal", "path"), f"{key}.policy.guide", "must be goal or path", self.policy.guide)
-        require(self.policy.message in ("linear", "relu"), f"{key}.policy.message", "must be linear or relu",
-                self.policy.message)
-        require(0 <= self.reward.adp_lambda <= 1, f"{key}.reward.adp_lambda", "must be in [0, 1]", self.reward.adp_lambda)
+        require(
+            self.policy.message in ("linear", "relu"),
+            f"{key}.policy.message",
+            "must be linear or relu",
+            self.policy.message,
+        )
+        require(
+            0 <= self.reward.adp_lambda <= 1, f"{key}.reward.adp_lambda", "must be in [0, 1]", self.reward.adp_lambda
+        )
         self.plan.check(f"{key}.plan")
-        require(self.policy.hidden >= 1 and self.policy.message_layers >= 0, f"{key}.policy", "hidden >= 1, "
-                "message_layers >= 0", (self.policy.hidden, self.policy.message_layers))
+        require(
+            self.policy.hidden >= 1 and self.policy.message_layers >= 0,
+            f"{key}.policy",
+            "hidden >= 1, message_layers >= 0",
+            (self.policy.hidden, self.policy.message_layers),
+        )

@@ -9,6 +9,7 @@ from torch import nn
 
 from stafpipe.learning.config import PolicyConfig
 from stafpipe.learning.features import EDGE, OWN
+from stafpipe.learning.policy_net import PolicyNet
 
 
 def _mlp(sizes: list[int]) -> nn.Sequential:
@@ -16,12 +17,15 @@ def _mlp(sizes: list[int]) -> nn.Sequential:
     for k in range(len(sizes) - 1):
         layers.append(nn.Linear(sizes[k], sizes[k + 1]))
         if k + 2 < len(sizes):
-            layers.append(nn.ReLU())  # ReLU, not tanh: 4x faster on this torch build (measured on the 2-core development machine)
+            layers.append(
+                nn.ReLU()
+            )  # ReLU, not tanh: 4x faster on this torch build (measured on the 2-core development machine)
     return nn.Sequential(*layers)
 
 
-class DGNNPolicy(nn.Module):
-    """Gaussian policy over planar velocity commands (in the robot's frame, scaled by max speed) and a value per robot."""
+class DGNNPolicy(PolicyNet):
+    """Gaussian policy over planar velocity commands (in the robot's frame, scaled by max speed) and a value per
+    robot."""
 
     def __init__(self, cfg: PolicyConfig):
         super().__init__()
@@ -59,6 +63,3 @@ class DGNNPolicy(nn.Module):
         e = self.trunk(own, edge, mask)
         team = e.mean(dim=-2, keepdim=True).expand_as(e)
         return self.actor(e), self.critic(torch.cat([e, team], dim=-1))[..., 0]
-
-    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
-        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))

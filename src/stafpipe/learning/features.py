@@ -48,8 +48,15 @@ def features(obs: Observation, goal_clip: float, sensing_radius: float, target: 
     dist = np.linalg.norm(to_goal, axis=-1, keepdims=True)
     to_goal = to_goal * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     near = np.minimum(obs.obstacle_distance, sensing_radius)[..., None]
-    own = np.concatenate([to_robot_frame(to_goal, c, s), to_robot_frame(obs.velocity, c, s),
-                          _clip_obstacle(obs, c, s, sensing_radius), near], axis=-1)
+    own = np.concatenate(
+        [
+            to_robot_frame(to_goal, c, s),
+            to_robot_frame(obs.velocity, c, s),
+            _clip_obstacle(obs, c, s, sensing_radius),
+            near,
+        ],
+        axis=-1,
+    )
     cc, ss = c[..., :, None], s[..., :, None]
     rel = to_robot_frame(obs.rel_position, cc, ss)
     rel_v = to_robot_frame(obs.rel_velocity, cc, ss)
@@ -68,8 +75,9 @@ def _clip_obstacle(obs: Observation, c: np.ndarray, s: np.ndarray, radius: float
 STAF_OWN, STAF_EDGE = 6, 9
 
 
-def staf_features(obs: Observation, target: np.ndarray, same: np.ndarray, goal_clip: float,
-                  sensing_radius: float) -> Features:
+def staf_features(
+    obs: Observation, target: np.ndarray, same: np.ndarray, goal_clip: float, sensing_radius: float
+) -> Features:
     """STAF's robot states s (Sec. 3, Problem Definition: position, goal, velocity, closest obstacle), in robot i's
     frame. Own (.., n, 6): s_i = [t_i - p_i (clipped), q_i, c_i] (its position is the frame's origin); edge
     (.., n, n, 9): s_j - s_i = [p_j - p_i, t_j - t_i, q_j - q_i, c_j - c_i, same_ij - 1], where t is the robot's target
@@ -81,19 +89,36 @@ def staf_features(obs: Observation, target: np.ndarray, same: np.ndarray, goal_c
     clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     length = np.linalg.norm(obs.obstacle, axis=-1, keepdims=True)
     obstacle = obs.obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))  # seen at most at the radius
-    own = np.concatenate([to_robot_frame(clipped, c, s), to_robot_frame(obs.velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1)
+    own = np.concatenate(
+        [to_robot_frame(clipped, c, s), to_robot_frame(obs.velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1
+    )
     cc, ss = c[..., :, None], s[..., :, None]
     pair = lambda v: v[..., None, :, :] - v[..., :, None, :]  # noqa: E731  [i, j] = v_j - v_i
-    diff = np.concatenate([to_robot_frame(obs.rel_position, cc, ss), to_robot_frame(pair(target), cc, ss),
-                           to_robot_frame(obs.rel_velocity, cc, ss), to_robot_frame(pair(obstacle), cc, ss),
-                           (same.astype(np.float32) - 1.0)[..., None]], axis=-1)
+    diff = np.concatenate(
+        [
+            to_robot_frame(obs.rel_position, cc, ss),
+            to_robot_frame(pair(target), cc, ss),
+            to_robot_frame(obs.rel_velocity, cc, ss),
+            to_robot_frame(pair(obstacle), cc, ss),
+            (same.astype(np.float32) - 1.0)[..., None],
+        ],
+        axis=-1,
+    )
     mask = obs.neighbours
     return Features(own.astype(np.float32), np.where(mask[..., None], diff, 0.0).astype(np.float32), mask)
 
 
-def staf_pairs(position: np.ndarray, velocity: np.ndarray, heading: np.ndarray, obstacle: np.ndarray,
-               target: np.ndarray, labels: np.ndarray, goal_clip: float, sensing_radius: float,
-               radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def staf_pairs(
+    position: np.ndarray,
+    velocity: np.ndarray,
+    heading: np.ndarray,
+    obstacle: np.ndarray,
+    target: np.ndarray,
+    labels: np.ndarray,
+    goal_clip: float,
+    sensing_radius: float,
+    radius: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`staf_features` of one world as an edge list (large teams): own (n, 6), receiver (E,), diff (E, 9) for every
     ordered pair within `radius` (a k-d tree finds them; perfect sensing)."""
     from scipy.spatial import cKDTree
@@ -107,9 +132,18 @@ def staf_pairs(position: np.ndarray, velocity: np.ndarray, heading: np.ndarray, 
     clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
     length = np.linalg.norm(obstacle, axis=-1, keepdims=True)
     obstacle = obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))
-    own = np.concatenate([to_robot_frame(clipped, c, s), to_robot_frame(velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1)
+    own = np.concatenate(
+        [to_robot_frame(clipped, c, s), to_robot_frame(velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1
+    )
     ci, si = c[i], s[i]
-    diff = np.concatenate([to_robot_frame(position[j] - position[i], ci, si), to_robot_frame(target[j] - target[i], ci, si),
-                           to_robot_frame(velocity[j] - velocity[i], ci, si), to_robot_frame(obstacle[j] - obstacle[i], ci, si),
-                           (labels[j] == labels[i]).astype(float)[:, None] - 1.0], axis=-1)
+    diff = np.concatenate(
+        [
+            to_robot_frame(position[j] - position[i], ci, si),
+            to_robot_frame(target[j] - target[i], ci, si),
+            to_robot_frame(velocity[j] - velocity[i], ci, si),
+            to_robot_frame(obstacle[j] - obstacle[i], ci, si),
+            (labels[j] == labels[i]).astype(float)[:, None] - 1.0,
+        ],
+        axis=-1,
+    )
     return own.astype(np.float32), i, diff.astype(np.float32)

@@ -22,6 +22,7 @@ from stafpipe.controllers.base import TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS, Adapter
 from stafpipe.learning.config import TrainPPOConfig
+from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.learning.rollout import Rollout, collect, commands, gae
 from stafpipe.learning.teachers import teacher_actions
 from stafpipe.progress import progress
@@ -35,16 +36,28 @@ STATE_FILE = "ppo_state.pt"
 EVAL_SEED = 10_000_019  # evaluation episodes use seeds EVAL_SEED + world, never a training draw
 
 
-def update(policy: torch.nn.Module, opt: torch.optim.Optimizer, ro: Rollout, adv: torch.Tensor, ret: torch.Tensor,
-           tc: TrainPPOConfig, gen: torch.Generator) -> dict[str, float]:
+def update(
+    policy: PolicyNet,
+    opt: torch.optim.Optimizer,
+    ro: Rollout,
+    adv: torch.Tensor,
+    ret: torch.Tensor,
+    tc: TrainPPOConfig,
+    gen: torch.Generator,
+) -> dict[str, float]:
     """`tc.epochs` passes of minibatch updates over world-steps (a sample keeps its world's n robots together)."""
     t, b = ro.rewards.shape[:2]
     flat = lambda x: x.reshape(t * b, *x.shape[2:])  # noqa: E731
     b_own, b_edge, b_mask, b_act = flat(ro.own), flat(ro.edge), flat(ro.mask), flat(ro.actions)
     b_logp, b_adv, b_ret = flat(ro.logprobs), flat(adv), flat(ret)
     size = t * b // tc.minibatches
-    out = {"losses/policy": 0.0, "losses/value": 0.0, "losses/entropy": 0.0, "losses/approx_kl": 0.0,
-           "losses/clipfrac": 0.0}
+    out = {
+        "losses/policy": 0.0,
+        "losses/value": 0.0,
+        "losses/entropy": 0.0,
+        "losses/approx_kl": 0.0,
+        "losses/clipfrac": 0.0,
+    }
     count = 0
     for _ in range(tc.epochs):
         order = torch.randperm(t * b, generator=gen)
@@ -80,19 +93,32 @@ Drawn = tuple[Scenario, np.ndarray, float]
 
 def teams_of(drawn: list[Drawn], worlds: Worlds) -> list[TeamInfo]:
     """What each world's controller knows at the start of an episode (after `worlds.reset`), as in `eval`."""
-    return [TeamInfo(sc, worlds.pos[w].copy(), worlds.goal[w].copy(), sc.template(), path, eta)
-            for w, (sc, path, eta) in enumerate(drawn)]
+    return [
+        TeamInfo(sc, worlds.pos[w].copy(), worlds.goal[w].copy(), sc.template(), path, eta)
+        for w, (sc, path, eta) in enumerate(drawn)
+    ]
 
 
-def _teacher_samples(policy: torch.nn.Module | None, adapter: Adapter, drawn: list[Drawn], world_cfg: WorldConfig,
-                     sensing: SensingConfig, tc: TrainPPOConfig, rng: np.random.Generator) -> tuple[torch.Tensor, ...]:
+def _teacher_samples(
+    policy: PolicyNet | None,
+    adapter: Adapter,
+    drawn: list[Drawn],
+    world_cfg: WorldConfig,
+    sensing: SensingConfig,
+    tc: TrainPPOConfig,
+    rng: np.random.Generator,
+) -> tuple[torch.Tensor, ...]:
     """One batch of episodes with the teacher's action as the label of every state: driven by the teacher itself
     (`policy` None) or by the network's mean action (DAgger), with Gaussian action noise."""
     im = tc.imitation
     worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
     obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, len(drawn))])
     adapter.begin(teams_of(drawn, worlds), teacher=True)
-    own, edge, mask, target, weight = [], [], [], [], []
+    own: list[torch.Tensor] = []
+    edge: list[torch.Tensor] = []
+    mask: list[torch.Tensor] = []
+    target: list[torch.Tensor] = []
+    weight: list[torch.Tensor] = []
     for _ in range(tc.episode_steps):
         f = adapter.step(obs, world_cfg.control_dt).features
         to_aim = adapter.teacher_aim() - obs.position
@@ -109,13 +135,21 @@ def _teacher_samples(policy: torch.nn.Module | None, adapter: Adapter, drawn: li
         if policy is not None:
             with torch.no_grad():
                 drive = policy.act(own[-1], edge[-1], mask[-1]).numpy().astype(float)
-        obs, _ = worlds.step(commands(drive + rng.normal(0.0, im.noise, act.shape), worlds.heading,
-                                      worlds.robot.max_speed))
+        obs, _ = worlds.step(
+            commands(drive + rng.normal(0.0, im.noise, act.shape), worlds.heading, worlds.robot.max_speed)
+        )
     return tuple(torch.cat(x) for x in (own, edge, mask, target, weight))
 
 
-def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random.Generator, int], list[Drawn]],
-            world_cfg: WorldConfig, sensing: SensingConfig, tc: TrainPPOConfig, seed: int) -> dict[str, float]:
+def imitate(
+    policy: PolicyNet,
+    adapter: Adapter,
+    draw: Callable[[np.random.Generator, int], list[Drawn]],
+    world_cfg: WorldConfig,
+    sensing: SensingConfig,
+    tc: TrainPPOConfig,
+    seed: int,
+) -> dict[str, float]:
     """Warm start (`train_ppo.imitation.epochs` > 0): the network learns to imitate a hand-made low level (the
     teacher, learning/teachers.py) by supervised regression of the action mean, first on states the teacher visits,
     then (`imitation.dagger` rounds, DAgger: Ross, Gordon and Bagnell, AISTATS 2011) on states the network itself
@@ -131,8 +165,10 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
     loss = torch.zeros(())
     for round_ in progress(range(1 + im.dagger), desc="train-ppo: imitation", unit="round"):
         driver = policy if round_ > 0 or tc.init_from else None  # a loaded network drives from the first round
-        sets += [_teacher_samples(driver, adapter, draw(rng, tc.worlds), world_cfg, sensing, tc, rng)
-                 for _ in range(im.rollouts)]
+        sets += [
+            _teacher_samples(driver, adapter, draw(rng, tc.worlds), world_cfg, sensing, tc, rng)
+            for _ in range(im.rollouts)
+        ]
         for _ in range(im.epochs):
             for k in torch.randperm(len(sets), generator=gen).tolist():
                 b_own, b_edge, b_mask, b_target, b_weight = sets[k]
@@ -144,16 +180,29 @@ def imitate(policy: torch.nn.Module, adapter: Adapter, draw: Callable[[np.random
                     opt.zero_grad()
                     loss.backward()
                     opt.step()
-        log.info("imitation round %d (%s teacher): %d batches, loss %.4f", round_, im.teacher, len(sets),
-                 float(loss.detach()))
+        log.info(
+            "imitation round %d (%s teacher): %d batches, loss %.4f",
+            round_,
+            im.teacher,
+            len(sets),
+            float(loss.detach()),
+        )
     samples = sum(x[0].shape[0] * x[0].shape[1] for x in sets)
     return {"imitation/loss": float(loss.detach()), "imitation/samples": float(samples)}
 
 
-def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator, int], list[Drawn]],
-              world_cfg: WorldConfig, sensing: SensingConfig, tolerance: float, seed: int, out_dir: Path,
-              config_hash: str, resume_from: Path | None, on_iteration: Callable[[list[dict[str, float]]], None]
-              ) -> tuple[torch.nn.Module, list[dict[str, float]]]:
+def train_ppo(
+    tc: TrainPPOConfig,
+    draw_scenarios: Callable[[np.random.Generator, int], list[Drawn]],
+    world_cfg: WorldConfig,
+    sensing: SensingConfig,
+    tolerance: float,
+    seed: int,
+    out_dir: Path,
+    config_hash: str,
+    resume_from: Path | None,
+    on_iteration: Callable[[list[dict[str, float]]], None],
+) -> tuple[PolicyNet, list[dict[str, float]]]:
     """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state."""
     torch.set_num_threads(tc.threads)
     torch.manual_seed(seed)
@@ -193,10 +242,16 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
         done = time.perf_counter()
         samples = ro.rewards.numel()
         done_before = history[-1]["robot_steps"] if history else 0.0  # team sizes differ between iterations
-        row = {"iteration": it + 1, "robot_steps": float(done_before + samples),
-               **{f"charts/{k}": v for k, v in stats.items()}, **losses,
-               "charts/fps": samples / (done - began), "charts/rollout_fps": samples / (collected - began),
-               "charts/update_seconds": done - collected, "charts/log_std": float(policy.log_std.detach().mean())}
+        row = {
+            "iteration": it + 1,
+            "robot_steps": float(done_before + samples),
+            **{f"charts/{k}": v for k, v in stats.items()},
+            **losses,
+            "charts/fps": samples / (done - began),
+            "charts/rollout_fps": samples / (collected - began),
+            "charts/update_seconds": done - collected,
+            "charts/log_std": float(policy.log_std.detach().mean()),
+        }
         if tc.eval_every and ((it + 1) % tc.eval_every == 0 or it + 1 == tc.iterations):
             worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)  # same scenarios, fixed evaluation seeds
             obs = worlds.reset([EVAL_SEED + w for w in range(tc.worlds)])
@@ -213,7 +268,7 @@ def train_ppo(tc: TrainPPOConfig, draw_scenarios: Callable[[np.random.Generator,
     return policy, history
 
 
-def initial_weights(tc: TrainPPOConfig) -> torch.nn.Module:
+def initial_weights(tc: TrainPPOConfig) -> PolicyNet:
     """The network of `train_ppo.init_from`, refused where its method or policy settings differ from this run's."""
     from stafpipe.learning.checkpoint import load_policy
 
@@ -221,15 +276,34 @@ def initial_weights(tc: TrainPPOConfig) -> torch.nn.Module:
     ours, theirs = dataclasses.asdict(tc.policy), dataclasses.asdict(loaded.cfg)
     differ = {k: (theirs[k], ours[k]) for k in ours if k != "init_log_std" and ours[k] != theirs.get(k)}
     if differ:
-        raise StafpipeError(f"train_ppo.init_from: {tc.init_from} was trained with other train_ppo.policy settings "
-                            f"(checkpoint, this run): {differ}")
+        raise StafpipeError(
+            f"train_ppo.init_from: {tc.init_from} was trained with other train_ppo.policy settings "
+            f"(checkpoint, this run): {differ}"
+        )
     return loaded
 
 
-def _save(out_dir: Path, config_hash: str, iteration: int, policy: torch.nn.Module, opt: torch.optim.Optimizer,
-          gen: torch.Generator, history: list[dict[str, float]], warm: dict[str, float]) -> None:
+def _save(
+    out_dir: Path,
+    config_hash: str,
+    iteration: int,
+    policy: PolicyNet,
+    opt: torch.optim.Optimizer,
+    gen: torch.Generator,
+    history: list[dict[str, float]],
+    warm: dict[str, float],
+) -> None:
     """The whole training state after `iteration` iterations (0: after the warm start), an exact resume point."""
-    save_payload(out_dir / STATE_FILE, {"config_hash": config_hash, "iteration": iteration,
-                                      "policy": policy.state_dict(), "optimizer": opt.state_dict(),
-                                      "torch_rng": torch.get_rng_state(), "minibatch_rng": gen.get_state(),
-                                      "history": history, "warm": warm})
+    save_payload(
+        out_dir / STATE_FILE,
+        {
+            "config_hash": config_hash,
+            "iteration": iteration,
+            "policy": policy.state_dict(),
+            "optimizer": opt.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+            "minibatch_rng": gen.get_state(),
+            "history": history,
+            "warm": warm,
+        },
+    )

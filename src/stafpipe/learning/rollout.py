@@ -9,6 +9,7 @@ import torch
 
 from stafpipe.learning.adapters import Adapter
 from stafpipe.learning.config import RewardConfig, TrainPPOConfig
+from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.sensing import Observation
 from stafpipe.world import Worlds
 
@@ -44,8 +45,16 @@ def contact_penalties(worlds: Worlds, obs: Observation, rc: RewardConfig) -> np.
     return rc.robot_collision * robot_hits + rc.wall_contact * wall
 
 
-def step_reward(adapter: Adapter, worlds: Worlds, obs: Observation, aim: np.ndarray, before: np.ndarray,
-                reached: np.ndarray, tolerance: float, rc: RewardConfig) -> tuple[np.ndarray, ...]:
+def step_reward(
+    adapter: Adapter,
+    worlds: Worlds,
+    obs: Observation,
+    aim: np.ndarray,
+    before: np.ndarray,
+    reached: np.ndarray,
+    tolerance: float,
+    rc: RewardConfig,
+) -> tuple[np.ndarray, ...]:
     """(B, n) reward of the step just taken, each robot's distance to its goal slot and whether it has reached it:
     progress towards the adapter's aim (from `before`), the one-off arrival bonus, contacts and the method's own
     terms. The trainer and the multi-agent environment (marl_env.py) both reward through this."""
@@ -57,8 +66,14 @@ def step_reward(adapter: Adapter, worlds: Worlds, obs: Observation, aim: np.ndar
     return reward, new_dist, reached | now_reached
 
 
-def episode_stats(worlds: Worlds, dist: np.ndarray, reached: np.ndarray, tolerance: float, hits: int,
-                  returns: "np.ndarray | torch.Tensor") -> dict[str, float]:
+def episode_stats(
+    worlds: Worlds,
+    dist: np.ndarray,
+    reached: np.ndarray,
+    tolerance: float,
+    hits: int,
+    returns: np.ndarray | torch.Tensor,
+) -> dict[str, float]:
     """The trainer's end-of-episode metrics of B worlds; `returns` (B, n) the robots' summed rewards."""
     at_goal = dist <= tolerance
     return {
@@ -70,8 +85,15 @@ def episode_stats(worlds: Worlds, dist: np.ndarray, reached: np.ndarray, toleran
     }
 
 
-def collect(policy: torch.nn.Module, adapter: Adapter, worlds: Worlds, obs: Observation, tc: TrainPPOConfig,
-            tolerance: float, deterministic: bool = False) -> tuple[Rollout, dict[str, float]]:
+def collect(
+    policy: PolicyNet,
+    adapter: Adapter,
+    worlds: Worlds,
+    obs: Observation,
+    tc: TrainPPOConfig,
+    tolerance: float,
+    deterministic: bool = False,
+) -> tuple[Rollout, dict[str, float]]:
     """Run `tc.episode_steps` steps in every world with actions sampled from the policy (its mean if `deterministic`,
     as evaluation acts); the method's `adapter` (begun on these worlds' teams) gives the features, the point each
     robot's progress is measured to, its goal slot and the method's own reward terms."""
@@ -93,8 +115,15 @@ def collect(policy: torch.nn.Module, adapter: Adapter, worlds: Worlds, obs: Obse
         obs, events = worlds.step(commands(action.numpy(), worlds.heading, worlds.robot.max_speed))
         hits += sum(len(e) for e in events)
         reward, dist, reached = step_reward(adapter, worlds, obs, aim, before, reached, tolerance, rc)
-        for key, v in (("own", own), ("edge", edge), ("mask", mask), ("actions", action), ("logprobs", logprob),
-                       ("values", value), ("rewards", torch.from_numpy(reward.astype(np.float32)))):
+        for key, v in (
+            ("own", own),
+            ("edge", edge),
+            ("mask", mask),
+            ("actions", action),
+            ("logprobs", logprob),
+            ("values", value),
+            ("rewards", torch.from_numpy(reward.astype(np.float32))),
+        ):
             buf[key].append(v)
     f = adapter.step(obs, 0.0).features
     with torch.no_grad():
@@ -103,8 +132,9 @@ def collect(policy: torch.nn.Module, adapter: Adapter, worlds: Worlds, obs: Obse
     return rollout, episode_stats(worlds, dist, reached, tolerance, hits, rollout.rewards.sum(0))
 
 
-def gae(rewards: torch.Tensor, values: torch.Tensor, last_value: torch.Tensor, gamma: float,
-        lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+def gae(
+    rewards: torch.Tensor, values: torch.Tensor, last_value: torch.Tensor, gamma: float, lam: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Generalized advantage estimation over (T, ...) buffers of one truncated episode (no terminal inside it):
     delta_t = r_t + gamma V(s_{t+1}) - V(s_t); A_t = delta_t + gamma lam A_{t+1}. Returns (advantages, returns)."""
     adv = torch.zeros_like(rewards)

@@ -18,6 +18,7 @@ from torch import nn
 
 from stafpipe.learning.config import PolicyConfig
 from stafpipe.learning.features import STAF_EDGE
+from stafpipe.learning.policy_net import PolicyNet
 
 
 def proportional_step(own: torch.Tensor, gain: float) -> torch.Tensor:
@@ -27,7 +28,7 @@ def proportional_step(own: torch.Tensor, gain: float) -> torch.Tensor:
     return step / step.norm(dim=-1, keepdim=True).clamp_min(1.0)
 
 
-class StafPolicy(nn.Module):
+class StafPolicy(PolicyNet):
     """phi (W^z, W^f) + psi, and a critic head (own embedding and the team's mean: a centralized critic)."""
 
     def __init__(self, cfg: PolicyConfig):
@@ -42,8 +43,10 @@ class StafPolicy(nn.Module):
         self.critic = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, 1))
         self.log_std = nn.Parameter(torch.full((2,), cfg.init_log_std))
         if cfg.prior_gain > 0:  # a residual starts at zero: the untrained policy is the proportional step itself
-            nn.init.zeros_(self.psi[2].weight)
-            nn.init.zeros_(self.psi[2].bias)
+            last = self.psi[2]
+            assert isinstance(last, nn.Linear)
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
 
     def embed(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """f (.., n, hidden): own (.., n, 6), edge (.., n, n, 9), mask (.., n, n)."""
@@ -56,7 +59,8 @@ class StafPolicy(nn.Module):
         return self.w_f(z) + (msg * mask[..., None].float()).sum(-2)
 
     def embed_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
-        """`embed` on an edge list, for large teams: own (n, 6), receiver (E,) = i of each pair, diff (E, 9) = s_j - s_i."""
+        """`embed` on an edge list, for large teams: own (n, 6), receiver (E,) = i of each pair, diff (E, 9) = s_j -
+        s_i."""
         z = own @ self.w_z.weight[:, 2:8].T + self.w_z.weight[:, 8] + self.b_z
         msg = self.w_f(self.w_z(diff))
         if self.cfg.message == "relu":
@@ -82,6 +86,3 @@ class StafPolicy(nn.Module):
         f = self.embed(own, edge, mask)
         team = f.mean(dim=-2, keepdim=True).expand_as(f)
         return self._mean(f, own), self.critic(torch.cat([f, team], dim=-1))[..., 0]
-
-    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
-        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))

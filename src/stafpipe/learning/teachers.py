@@ -19,13 +19,15 @@ TEACHERS = ("proportional", "avoiding")
 AVOID_DISTANCE, AVOID_GAIN = 0.35, 2.0  # as method=lf's defaults
 
 
-def teacher_actions(kind: str, to_aim: np.ndarray, obs: Observation, radius: float, max_speed: float,
-                    gain: float) -> np.ndarray:
+def teacher_actions(
+    kind: str, to_aim: np.ndarray, obs: Observation, radius: float, max_speed: float, gain: float
+) -> np.ndarray:
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
     vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs`."""
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
     world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
     if kind == "avoiding":
-        world = np.stack([limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN)
-                          for w in range(len(world))])
+        world = np.stack(
+            [limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN) for w in range(len(world))]
+        )
     return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed

@@ -32,11 +32,11 @@ def partition_figure(parts: pd.DataFrame, radius: float = 2.0, ncols: int = 4, t
         centre = pos.mean(0)
         for s in np.unique(sub):
             c = COLOURS[int(s) % len(COLOURS)]
-            ax.scatter(*pos[sub == s].T, s=36, color=c, zorder=3, label=f"subteam {s}")
+            ax.scatter(pos[sub == s, 0], pos[sub == s, 1], s=36, color=c, zorder=3, label=f"subteam {s}")
             # the goal centre, drawn relative to the team so that panels stay compact
             d = goal[sub == s].mean(0) - goal.mean(0) + centre + _unit(goal.mean(0) - centre) * _span(pos) * 0.9
             ax.annotate("", xy=d, xytext=pos[sub == s].mean(0), arrowprops={"arrowstyle": "->", "color": c, "lw": 0.8})
-            ax.scatter(*d, marker="x", s=30, color=c, zorder=3)
+            ax.scatter(d[0], d[1], marker="x", s=30, color=c, zorder=3)
         ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])

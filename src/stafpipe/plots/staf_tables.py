@@ -29,8 +29,14 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
     ("staf", "wedge"): (100.00, 69.30, 80.52, 80.51, 80.50),
     ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
 }
-METRICS = ("sr", "tt", *(f"cfi_{s:g}" for s in CFI_SIGMAS), *(f"cfi_printed_{s:g}" for s in CFI_SIGMAS), "tt_ratio",
-           "collisions")
+METRICS = (
+    "sr",
+    "tt",
+    *(f"cfi_{s:g}" for s in CFI_SIGMAS),
+    *(f"cfi_printed_{s:g}" for s in CFI_SIGMAS),
+    "tt_ratio",
+    "collisions",
+)
 GROUP = ["run", "method", "label", "formation", "n", "drive", "scenario", "paper_cell"]
 
 
@@ -70,9 +76,24 @@ def _cell(mean: float, ci: float, scale: float = 1.0, digits: int = 1) -> str:
 
 def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
     """The table as Markdown: ours (mean ± 95 % CI; SR and CFI in %) and the paper's value in brackets."""
-    head = ["method", "scenario", "eta m", "formation", "n", "drive", "episodes", "SR %", "TT s", "CFI 0.5 %",
-            "CFI 0.1 %", "CFI 0.01 %", "CFI as printed 0.5 / 0.1 / 0.01 %", "TT / bound", "collisions",
-            "all robots ok"]
+    head = [
+        "method",
+        "scenario",
+        "eta m",
+        "formation",
+        "n",
+        "drive",
+        "episodes",
+        "SR %",
+        "TT s",
+        "CFI 0.5 %",
+        "CFI 0.1 %",
+        "CFI 0.01 %",
+        "CFI as printed 0.5 / 0.1 / 0.01 %",
+        "TT / bound",
+        "collisions",
+        "all robots ok",
+    ]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for _, r in table.iterrows():
         eta = r.get("eta", math.nan)
@@ -80,20 +101,37 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         labelled = isinstance(label, str) and bool(label)  # a variant of ours (e.g. m-auto): not the paper's setup
         papers_cell = r.get("n") == 10 and bool(r.get("paper_cell", False)) and not labelled  # the paper's map, team
         ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and papers_cell else None
-        cells = [_cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
-                 _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan))]
+        cells = [
+            _cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
+            _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan)),
+        ]
         cells += [_cell(r.get(f"cfi_{s:g}", math.nan), r.get(f"cfi_{s:g}_ci95", math.nan), 100) for s in CFI_SIGMAS]
         if ref is not None:
             cells = [f"{c} [{p:.1f}]" for c, p in zip(cells, ref, strict=True)]
         printed = [r.get(f"cfi_printed_{s:g}", math.nan) for s in CFI_SIGMAS]  # means; CIs in table.csv
         cells.append(" / ".join(f"{100 * v:.1f}" for v in printed) if np.all(np.isfinite(printed)) else "-")
-        cells += [_cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
-                  _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
-                  f"{100 * r['all_succeeded']:.0f} %"]
+        cells += [
+            _cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
+            _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
+            f"{100 * r['all_succeeded']:.0f} %",
+        ]
         method = f"{r['method']} ({label})" if labelled else str(r["method"])
-        lines.append("| " + " | ".join([method, str(r.get("scenario", "")), _cell(eta, math.nan, 1, 2),
-                                        str(r["formation"]), str(r.get("n", "")), str(r.get("drive", "")),
-                                        str(r["episodes"]), *cells]) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    method,
+                    str(r.get("scenario", "")),
+                    _cell(eta, math.nan, 1, 2),
+                    str(r["formation"]),
+                    str(r.get("n", "")),
+                    str(r.get("drive", "")),
+                    str(r["episodes"]),
+                    *cells,
+                ]
+            )
+            + " |"
+        )
     if paper:
         lines += ["", "[brackets]: STAF Table 1 (Gazebo, 10 trials per cell). Ours: mean ± 95 % CI over the episodes."]
     return "\n".join(lines) + "\n"
@@ -121,8 +159,14 @@ def cfi_sigma_figure(table: pd.DataFrame):
     for _, r in table.iterrows():
         means = [100 * r.get(f"cfi_{s:g}", math.nan) for s in sigmas]
         cis = [100 * r.get(f"cfi_{s:g}_ci95", math.nan) for s in sigmas]
-        ax.errorbar(sigmas, means, yerr=np.nan_to_num(cis), marker="o", capsize=3,
-                    label=f"{r['method']} {r['formation']} n={r.get('n', '?')}")
+        ax.errorbar(
+            sigmas,
+            means,
+            yerr=np.nan_to_num(cis),
+            marker="o",
+            capsize=3,
+            label=f"{r['method']} {r['formation']} n={r.get('n', '?')}",
+        )
     ax.set_xscale("log")
     ax.set_xlabel("sigma (m)")
     ax.set_ylabel("CFI (%)")

@@ -25,9 +25,14 @@ def loss_curve_figure(history: list[dict[str, float]]) -> Figure:
     return fig
 
 
-PPO_PANELS = [("charts/success_rate", "success rate"), ("charts/episode_return", "episode return"),
-              ("charts/collisions_per_episode", "collisions / episode"), ("losses/value", "value loss"),
-              ("losses/approx_kl", "approx. KL"), ("charts/fps", "robot-steps / s")]
+PPO_PANELS = [
+    ("charts/success_rate", "success rate"),
+    ("charts/episode_return", "episode return"),
+    ("charts/collisions_per_episode", "collisions / episode"),
+    ("losses/value", "value loss"),
+    ("losses/approx_kl", "approx. KL"),
+    ("charts/fps", "robot-steps / s"),
+]
 
 
 def ppo_figure(history: list[dict[str, float]]) -> Figure:
@@ -40,7 +45,7 @@ def ppo_figure(history: list[dict[str, float]]) -> Figure:
         eval_key = key.replace("charts/", "eval/")
         if eval_key != key and any(eval_key in row for row in history):
             pts = [(xv, row[eval_key]) for xv, row in zip(x, history, strict=True) if eval_key in row]
-            ax.plot(*zip(*pts), "o-", ms=3, label="mean action (eval)")
+            ax.plot(*zip(*pts, strict=True), "o-", ms=3, label="mean action (eval)")
             ax.legend(fontsize=7)
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("robot-steps (millions)", fontsize=8)

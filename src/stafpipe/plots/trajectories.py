@@ -1,5 +1,6 @@
 """STAF-Fig.-4-style trajectory plots: the static map in grey, each robot's path a line coloured by its subteam at each
-moment, start (circle) and goal (cross) of every robot, moving obstacles dashed. Read from the episode MCAP logs alone."""
+moment, start (circle) and goal (cross) of every robot, moving obstacles dashed. Read from the episode MCAP logs
+alone."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ OBSTACLE_GREY = "0.6"
 SUBTEAM_COLOURS = [f"C{k}" for k in range(10)]
 
 
-def draw_map(ax, scenario: Scenario) -> None:  # noqa: ANN001 (a matplotlib Axes)
+def draw_map(ax, scenario: Scenario) -> None:
     """Static obstacles in grey: solid polygons, discs and thick segments; world walls as a thin frame."""
     for poly in scenario.polygons:
         ax.add_patch(Polygon(poly, closed=True, color=OBSTACLE_GREY, lw=0))
@@ -29,9 +30,14 @@ def draw_map(ax, scenario: Scenario) -> None:  # noqa: ANN001 (a matplotlib Axes
         grid = scenario.occupancy
         h, w = grid.occupied.shape
         frame = Affine2D().rotate(grid.origin[2]).translate(*grid.origin[:2]) + ax.transData
-        ax.imshow(np.ma.masked_equal(grid.occupied.astype(np.int8), 0), origin="lower", interpolation="nearest",
-                  cmap=ListedColormap([OBSTACLE_GREY]), extent=(0, w * grid.resolution, 0, h * grid.resolution),
-                  transform=frame)
+        ax.imshow(
+            np.ma.masked_equal(grid.occupied.astype(np.int8), 0),
+            origin="lower",
+            interpolation="nearest",
+            cmap=ListedColormap([OBSTACLE_GREY]),
+            extent=(0, w * grid.resolution, 0, h * grid.resolution),
+            transform=frame,
+        )
     for cap in scenario.capsules:
         a, b = np.asarray(cap.a), np.asarray(cap.b)
         if cap.radius <= 0:
@@ -69,7 +75,7 @@ def trajectory_figure(rec: EpisodeRecord, title: str = "") -> Figure:
     for i in range(pos.shape[1]):
         segments = np.stack([pos[:-1, i], pos[1:, i]], axis=1)  # (T-1, 2, 2)
         colours = [SUBTEAM_COLOURS[int(s) % len(SUBTEAM_COLOURS)] for s in sub[:-1, i]]
-        ax.add_collection(LineCollection(segments, colors=colours, linewidths=1.2))
+        ax.add_collection(LineCollection(segments, colors=colours, linewidths=1.2))  # type: ignore[arg-type]
     ax.scatter(pos[0, :, 0], pos[0, :, 1], s=14, facecolors="none", edgecolors="k", linewidths=0.8, label="start")
     ax.scatter(rec.goal[:, 0], rec.goal[:, 1], s=14, marker="x", color="k", linewidths=0.8, label="goal")
     if rec.movers.size:
@@ -82,14 +88,16 @@ def trajectory_figure(rec: EpisodeRecord, title: str = "") -> Figure:
     ax.set_ylabel("y (m)")
     for j, (panel, idx) in enumerate(zip(axes[1:], teams, strict=True)):
         draw_map(panel, scenario)
-        for k, i in enumerate(idx):
-            panel.plot(pos[:, i, 0], pos[:, i, 1], color=f"C{k % 10}", lw=1.0, label=f"robot {i}")
+        for k, robot in enumerate(idx):
+            panel.plot(pos[:, robot, 0], pos[:, robot, 1], color=f"C{k % 10}", lw=1.0, label=f"robot {robot}")
         panel.set_title(f"subteam {j}: robots {', '.join(str(i) for i in idx)}", fontsize=8)
         panel.legend(loc="upper left", fontsize=6, ncols=3, framealpha=0.8)
     metrics = rec.metrics or {}
     summary = ", ".join(f"{k} {metrics[k]:.2f}" for k in ("sr", "tt", "cfi_0.1") if k in metrics)
-    ax.set_title(title or f"{rec.method} on {scenario.spec.name}, seed {rec.seed}" + (f" ({summary})" if summary else ""),
-                 fontsize=9)
+    ax.set_title(
+        title or f"{rec.method} on {scenario.spec.name}, seed {rec.seed}" + (f" ({summary})" if summary else ""),
+        fontsize=9,
+    )
     fig.tight_layout()
     return fig
 

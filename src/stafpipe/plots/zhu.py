@@ -18,8 +18,13 @@ from stafpipe.errors import StafpipeError
 from stafpipe.io import markdown_table
 from stafpipe.plots.trajectories import SUBTEAM_COLOURS, draw_map
 
-PART_NAMES = {"convex_regions": "Convex regions", "split_check": "Splitting checking", "graph_partition": "Graph partition",
-              "merge_decision": "Merging decisions", "formation_control": "Local formation control"}
+PART_NAMES = {
+    "convex_regions": "Convex regions",
+    "split_check": "Splitting checking",
+    "graph_partition": "Graph partition",
+    "merge_decision": "Merging decisions",
+    "formation_control": "Local formation control",
+}
 
 
 def snapshot_times(rec: EpisodeRecord, count: int = 4) -> list[float]:
@@ -37,7 +42,7 @@ def snapshot_times(rec: EpisodeRecord, count: int = 4) -> list[float]:
         if len(times) >= count:
             break
         times.append(float(t))
-    return sorted(set(round(t, 1) for t in times))[:count]
+    return sorted({round(t, 1) for t in times})[:count]
 
 
 def regions_figure(rec: EpisodeRecord, times: list[float]) -> Figure:
@@ -53,13 +58,16 @@ def regions_figure(rec: EpisodeRecord, times: list[float]) -> Figure:
         draw_map(ax, scenario)
         step = int(np.searchsorted(rec.time, t, side="right") - 1)
         when, regions = max((s for s in snapshots if s[0] <= t + 1e-9), key=lambda s: s[0], default=snapshots[0])
-        for sid, vertices in regions.items():
+        for _sid, vertices in regions.items():
             if len(vertices) >= 3:
                 ax.add_patch(Polygon(vertices, closed=True, facecolor="red", alpha=0.25, edgecolor="red", lw=1.0))
-        ax.scatter(rec.targets[step, :, 0], rec.targets[step, :, 1], s=10, color="k", zorder=3, label="target formation")
+        ax.scatter(
+            rec.targets[step, :, 0], rec.targets[step, :, 1], s=10, color="k", zorder=3, label="target formation"
+        )
         colours = [SUBTEAM_COLOURS[int(s) % len(SUBTEAM_COLOURS)] for s in rec.subteams[step]]
-        ax.scatter(rec.positions[step, :, 0], rec.positions[step, :, 1], s=40, marker="*", c=colours, zorder=4,
-                   label="robots")
+        ax.scatter(
+            rec.positions[step, :, 0], rec.positions[step, :, 1], s=40, marker="*", c=colours, zorder=4, label="robots"
+        )
         for m, spec in enumerate(scenario.spec.moving_obstacles):
             ax.add_patch(Circle(tuple(rec.movers[step, m]), spec.radius, color="gold", ec="k", lw=0.8, zorder=2))
         centre = rec.positions[step].mean(axis=0)
@@ -86,29 +94,58 @@ def timing_table(results: pd.DataFrame) -> pd.DataFrame:
         std = results[f"time_{part}_std"].to_numpy(float)
         used = c > 0
         if not used.any():
-            rows.append({"Computations": PART_NAMES[part], "Min.": math.nan, "Mean.": math.nan, "Max.": math.nan,
-                         "Std.": math.nan, "cycles": 0})
+            rows.append(
+                {
+                    "Computations": PART_NAMES[part],
+                    "Min.": math.nan,
+                    "Mean.": math.nan,
+                    "Max.": math.nan,
+                    "Std.": math.nan,
+                    "cycles": 0,
+                }
+            )
             continue
         c, mean, std = c[used], mean[used], std[used]
         grand = float((c * mean).sum() / c.sum())
         pooled = math.sqrt(float((c * (std**2 + (mean - grand) ** 2)).sum() / c.sum()))
-        rows.append({"Computations": PART_NAMES[part], "Min.": float(results[f"time_{part}_min"][used].min()),
-                     "Mean.": grand, "Max.": float(results[f"time_{part}_max"][used].max()), "Std.": pooled,
-                     "cycles": int(c.sum())})
+        rows.append(
+            {
+                "Computations": PART_NAMES[part],
+                "Min.": float(results[f"time_{part}_min"][used].min()),
+                "Mean.": grand,
+                "Max.": float(results[f"time_{part}_max"][used].max()),
+                "Std.": pooled,
+                "cycles": int(c.sum()),
+            }
+        )
     table = pd.DataFrame(rows)
-    total = {"Computations": "Total (sum of means)", "Min.": math.nan, "Mean.": float(np.nansum(table["Mean."])),
-             "Max.": math.nan, "Std.": math.nan, "cycles": int(table["cycles"].max())}
+    total = {
+        "Computations": "Total (sum of means)",
+        "Min.": math.nan,
+        "Mean.": float(np.nansum(table["Mean."])),
+        "Max.": math.nan,
+        "Std.": math.nan,
+        "cycles": int(table["cycles"].max()),
+    }
     return pd.concat([table, pd.DataFrame([total])], ignore_index=True)
 
 
 def latex_table(table: pd.DataFrame, caption: str) -> str:
     """Table I as a LaTeX tabular (booktabs), times to 0.001 ms, missing values as --."""
+
     def cell(v: object) -> str:
         return "--" if isinstance(v, float) and math.isnan(v) else (f"{v:.3f}" if isinstance(v, float) else str(v))
 
     cols = list(table.columns)
-    lines = [r"\begin{table}[t]", r"\centering", rf"\caption{{{caption}}}", r"\begin{tabular}{l" + "r" * (len(cols) - 1) + "}",
-             r"\toprule", " & ".join(cols) + r" \\", r"\midrule"]
+    lines = [
+        r"\begin{table}[t]",
+        r"\centering",
+        rf"\caption{{{caption}}}",
+        r"\begin{tabular}{l" + "r" * (len(cols) - 1) + "}",
+        r"\toprule",
+        " & ".join(cols) + r" \\",
+        r"\midrule",
+    ]
     lines += [" & ".join(cell(v) for v in row) + r" \\" for row in table.itertuples(index=False)]
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}", ""]
     return "\n".join(lines)

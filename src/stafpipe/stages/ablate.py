@@ -11,17 +11,25 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from stafpipe.highlevel.config import AblateConfig, HighLevelConfig, TrainHighConfig
 from stafpipe.io import atomic_write, markdown_table, save_figure, write_table
+from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
-GROUPS = {"loss_terms": ["variant", "labels"], "subteam_count": ["formation", "m"], "noise": ["sigma"],
-          "classical": ["formation", "m", "method"]}
-TITLES = {"loss_terms": "Loss ablation (STAF Fig. 7): raw argmax of each variant's network",
-          "subteam_count": "Subteam count (STAF Fig. 9)", "noise": "Position noise (STAF Fig. 14)",
-          "classical": "Learned cut vs classical partitions"}
+GROUPS = {
+    "loss_terms": ["variant", "labels"],
+    "subteam_count": ["formation", "m"],
+    "noise": ["sigma"],
+    "classical": ["formation", "m", "method"],
+}
+TITLES = {
+    "loss_terms": "Loss ablation (STAF Fig. 7): raw argmax of each variant's network",
+    "subteam_count": "Subteam count (STAF Fig. 9)",
+    "noise": "Position noise (STAF Fig. 14)",
+    "classical": "Learned cut vs classical partitions",
+}
 
 
 def run_ablate(cfg: DictConfig, out_dir: Path) -> list[Path]:
@@ -30,9 +38,9 @@ def run_ablate(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.launch import config_hash
     from stafpipe.plots.partitions import ari_figure, partition_figure
 
-    ab: AblateConfig = OmegaConf.to_object(cfg.ablate)  # type: ignore[assignment]
-    high: HighLevelConfig = OmegaConf.to_object(cfg.high)  # type: ignore[assignment]
-    tc: TrainHighConfig = OmegaConf.to_object(cfg.train_high)  # type: ignore[assignment]
+    ab = section(cfg.ablate, AblateConfig)
+    high = section(cfg.high, HighLevelConfig)
+    tc = section(cfg.train_high, TrainHighConfig)
     ab.check()
     high.check()
     tc.check()
@@ -41,10 +49,16 @@ def run_ablate(cfg: DictConfig, out_dir: Path) -> list[Path]:
         results, parts = studies.loss_terms_study(ab, high, tc, seed, out_dir, config_hash(cfg))
     else:
         model, made_by = load_checkpoint(high.checkpoint, overrides=high)
-        log.info("graph cut from %s (made by commit %s)", high.checkpoint or "the shipped checkpoint",
-                 made_by.get("commit", "?"))
-        study = {"subteam_count": studies.subteam_count_study, "noise": studies.noise_study,
-                 "classical": studies.classical_study}[ab.study]
+        log.info(
+            "graph cut from %s (made by commit %s)",
+            high.checkpoint or "the shipped checkpoint",
+            made_by.get("commit", "?"),
+        )
+        study = {
+            "subteam_count": studies.subteam_count_study,
+            "noise": studies.noise_study,
+            "classical": studies.classical_study,
+        }[ab.study]
         results, parts = study(model, ab, seed)
     summary = studies.summarise(results, GROUPS[ab.study])
     outputs = write_table(results, out_dir / "results") + write_table(summary, out_dir / "summary")

@@ -10,6 +10,7 @@ import dataclasses
 import logging
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -23,6 +24,7 @@ from stafpipe.geometry import Geometry
 from stafpipe.io import write_table
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario, build_scenario, resolve_scenario
+from stafpipe.sections import section
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
 
@@ -45,21 +47,26 @@ def scenario_for(cfg: DictConfig) -> Scenario:
 
 def with_overrides(scenario: Scenario, cfg: DictConfig) -> Scenario:
     """`scenario` with the `formation` and `robot` groups' non-null fields in place of its own."""
-    formation: FormationConfig = OmegaConf.to_object(cfg.formation)  # type: ignore[assignment]
+    formation = section(cfg.formation, FormationConfig)
     formation.check(allow_unset=True)
-    robot: RobotConfig = OmegaConf.to_object(cfg.robot)  # type: ignore[assignment]
+    robot = section(cfg.robot, RobotConfig)
     spec = scenario.spec
     if formation.type is not None:
         spacing = formation.spacing if formation.spacing is not None else spec.team.spacing
-        spec = dataclasses.replace(spec, team=dataclasses.replace(
-            spec.team, formation=formation.type, angle_deg=formation.angle_deg, spacing=spacing))
+        spec = dataclasses.replace(
+            spec,
+            team=dataclasses.replace(
+                spec.team, formation=formation.type, angle_deg=formation.angle_deg, spacing=spacing
+            ),
+        )
     if robot.overrides():
         spec = dataclasses.replace(spec, robot=dataclasses.replace(spec.robot, **robot.overrides()))
     return scenario if spec is scenario.spec else build_scenario(spec)
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
-    """Mean and 95 % confidence half-width (Student t) of every numeric metric, NaNs (e.g. TT of failed runs) left out."""
+    """Mean and 95 % confidence half-width (Student t) of every numeric metric, NaNs (e.g. TT of failed runs) left
+    out."""
     rows = []
     for col in df.columns:
         if col in ("episode", "seed") or not pd.api.types.is_numeric_dtype(df[col]):
@@ -73,23 +80,44 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
 
 def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Evaluate `cfg.method` on `cfg.scenario`."""
-    ev: EvalConfig = OmegaConf.to_object(cfg.eval)  # type: ignore[assignment]
+    ev = section(cfg.eval, EvalConfig)
     ev.check()
     scenario = scenario_for(cfg)
-    world_cfg: WorldConfig = OmegaConf.to_object(cfg.world)  # type: ignore[assignment]
-    sensing: SensingConfig = OmegaConf.to_object(cfg.sensing)  # type: ignore[assignment]
-    method_cfg = OmegaConf.to_object(cfg.method)
+    world_cfg = section(cfg.world, WorldConfig)
+    sensing = section(cfg.sensing, SensingConfig)
+    method_cfg: Any = OmegaConf.to_object(cfg.method)
     geometry = Geometry(scenario)
     rows, outputs = [], []
     for k in progress(range(ev.episodes), desc=f"eval {method_cfg.name} on {scenario.name}", unit="episode"):
         seed = episode_seed(int(cfg.seed), k)
         log_path = out_dir / "episodes" / f"episode_{k:04d}.mcap" if ev.log_episodes else None
         controller = make_controller(method_cfg)
-        values = run_episode(scenario, geometry, controller, method_cfg.name, seed, world_cfg,
-                             sensing, ev.goal_tolerance, ev.cfi_margin, log_path)
-        rows.append({"episode": k, "seed": seed, "method": method_cfg.name, "label": ev.label, "scenario": scenario.name,
-                     "formation": scenario.spec.team.formation, "n": scenario.spec.team.n,
-                     "drive": scenario.spec.robot.drive, **values, **controller.episode_stats()})
+        values = run_episode(
+            scenario,
+            geometry,
+            controller,
+            method_cfg.name,
+            seed,
+            world_cfg,
+            sensing,
+            ev.goal_tolerance,
+            ev.cfi_margin,
+            log_path,
+        )
+        rows.append(
+            {
+                "episode": k,
+                "seed": seed,
+                "method": method_cfg.name,
+                "label": ev.label,
+                "scenario": scenario.name,
+                "formation": scenario.spec.team.formation,
+                "n": scenario.spec.team.n,
+                "drive": scenario.spec.robot.drive,
+                **values,
+                **controller.episode_stats(),
+            }
+        )
         if log_path:
             outputs.append(log_path)
     df = pd.DataFrame(rows)

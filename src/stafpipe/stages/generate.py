@@ -1,7 +1,8 @@
 """`stafpipe generate`: synthetic formation instances that train STAF's high level.
 
 STAF Appendix C: "given a robot team formation, we randomly generate the positions of the
-robots within the formation. In total, we collect 10,000 data instances". Each instance is one team: a formation type and
+robots within the formation. In total, we collect 10,000 data instances". Each instance is one team: a formation type
+and
 size, its slots scaled, rotated and moved, Gaussian noise on each robot, the same formation placed at a goal ahead, and
 the width of the narrowest passage ahead. The table schema is documented in docs/data.md.
 """
@@ -14,12 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.formations import formation_slots, place
 from stafpipe.io import write_table
 from stafpipe.progress import progress
+from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
 SCHEMA_VERSION = "1"
@@ -45,7 +47,7 @@ def generate_instances(data: DataConfig, formation: FormationConfig, seed: int) 
     data.check()
     formation.check()  # generate needs a formation: the `scenario` option (type null) is refused here
     rng = np.random.default_rng(seed)
-    kinds = list(data.mix) or [formation.type]
+    kinds = list(data.mix) or [str(formation.type)]
     cache: dict[tuple[str, int], np.ndarray] = {}
     blocks: list[dict[str, np.ndarray]] = []
     for inst in progress(range(data.instances), desc="generate", unit="team"):
@@ -53,13 +55,15 @@ def generate_instances(data: DataConfig, formation: FormationConfig, seed: int) 
         n = int(rng.integers(data.n_min, data.n_max + 1))
         if (kind, n) not in cache:
             cache[kind, n] = formation_slots(kind, n, 1.0, formation.angle_deg)
-        spacing = formation.spacing * rng.uniform(1 - data.spacing_jitter, 1 + data.spacing_jitter)
+        spacing = float(formation.spacing or 1.0) * rng.uniform(1 - data.spacing_jitter, 1 + data.spacing_jitter)
         slots = cache[kind, n] * spacing
         heading = math.radians(rng.uniform(-data.heading_range_deg, data.heading_range_deg))
         centre = rng.uniform(-data.translation, data.translation, size=2)
         start = place(slots, centre, heading) + rng.normal(0.0, data.position_noise, size=(n, 2))
         goal_dir = heading + math.radians(rng.uniform(-data.goal_heading_jitter_deg, data.goal_heading_jitter_deg))
-        goal_centre = centre + rng.uniform(*data.goal_distance) * np.array([math.cos(goal_dir), math.sin(goal_dir)])
+        goal_centre = centre + rng.uniform(data.goal_distance[0], data.goal_distance[1]) * np.array(
+            [math.cos(goal_dir), math.sin(goal_dir)]
+        )
         goal = place(slots, goal_centre, heading)
         blocks.append(
             {
@@ -75,7 +79,7 @@ def generate_instances(data: DataConfig, formation: FormationConfig, seed: int) 
                 "slot_y": slots[:, 1],
                 "spacing": np.full(n, spacing),
                 "heading_deg": np.full(n, math.degrees(heading)),
-                "corridor_width": np.full(n, rng.uniform(*data.corridor_width)),
+                "corridor_width": np.full(n, rng.uniform(data.corridor_width[0], data.corridor_width[1])),
             }
         )
     columns = {name: np.concatenate([b[name] for b in blocks]) for name in COLUMNS}
@@ -84,8 +88,8 @@ def generate_instances(data: DataConfig, formation: FormationConfig, seed: int) 
 
 def run_generate(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Write `formations.parquet` (+ `.csv`) into `out_dir`."""
-    data: DataConfig = OmegaConf.to_object(cfg.data)  # type: ignore[assignment]
-    formation: FormationConfig = OmegaConf.to_object(cfg.formation)  # type: ignore[assignment]
+    data = section(cfg.data, DataConfig)
+    formation = section(cfg.formation, FormationConfig)
     df = generate_instances(data, formation, int(cfg.seed))
     meta = {"stafpipe.schema_version": SCHEMA_VERSION, "stafpipe.seed": str(cfg.seed)}
     outputs = write_table(df, out_dir / "formations", metadata=meta)

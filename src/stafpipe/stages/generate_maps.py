@@ -15,22 +15,32 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.io import atomic_write, write_table
 from stafpipe.mapgen import MapsConfig, generate_maps
+from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
 
 
 def run_generate_maps(cfg: DictConfig, out_dir: Path) -> list[Path]:
-    maps_cfg: MapsConfig = OmegaConf.to_object(cfg.maps)  # type: ignore[assignment]
+    maps_cfg = section(cfg.maps, MapsConfig)
     maps_cfg.check()
     specs = generate_maps(maps_cfg, int(cfg.seed))
     outputs, rows = [], []
     for k, spec in enumerate(specs):
         text = OmegaConf.to_yaml(OmegaConf.structured(spec))
-        outputs.append(atomic_write(out_dir / "maps" / f"map_{k:04d}.yaml", lambda tmp, t=text: tmp.write_text(t)))
-        rows.append({"file": f"maps/map_{k:04d}.yaml", "name": spec.name, "family": spec.name.rsplit("-", 1)[-1],
-                     "n": spec.team.n,
-                     "formation": spec.team.formation, "drive": spec.robot.drive, "length": spec.world.xmax,
-                     "height": spec.world.ymax, "obstacles": len(spec.obstacles)})
+        outputs.append(atomic_write(out_dir / "maps" / f"map_{k:04d}.yaml", lambda tmp, t=text: tmp.write_text(t)))  # type: ignore[misc]
+        rows.append(
+            {
+                "file": f"maps/map_{k:04d}.yaml",
+                "name": spec.name,
+                "family": spec.name.rsplit("-", 1)[-1],
+                "n": spec.team.n,
+                "formation": spec.team.formation,
+                "drive": spec.robot.drive,
+                "length": spec.world.xmax,
+                "height": spec.world.ymax,
+                "obstacles": len(spec.obstacles),
+            }
+        )
     outputs += write_table(pd.DataFrame(rows), out_dir / "maps")
     log.info("%d maps in %s", len(specs), out_dir / "maps")
     return outputs

@@ -14,6 +14,7 @@ from omegaconf import DictConfig, OmegaConf
 from stafpipe.config.schema import PlotConfig
 from stafpipe.errors import StafpipeError
 from stafpipe.io import atomic_write, save_figure
+from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
 
@@ -24,7 +25,9 @@ def _trajectory_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
 
     files = episode_files(run_dir)
     if not files:
-        raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
+        raise StafpipeError(
+            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
+        )
     if pc.max_episodes:
         files = files[: pc.max_episodes]
     records = [read_episode(f) for f in files]  # all read (and validated) before anything is written
@@ -37,7 +40,9 @@ def _connectivity_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
 
     files = episode_files(run_dir)
     if not files:
-        raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
+        raise StafpipeError(
+            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
+        )
     files = files[: pc.max_episodes] if pc.max_episodes else files
     return {"connectivity": connectivity_figure([read_episode(f) for f in files])}
 
@@ -49,11 +54,15 @@ def _region_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
 
     files = episode_files(run_dir)
     if not files:
-        raise StafpipeError(f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)")
+        raise StafpipeError(
+            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
+        )
     files = files[: pc.max_episodes] if pc.max_episodes else files
     records = [read_episode(f) for f in files]
-    return {f"regions_{path.stem}": regions_figure(rec, list(pc.times) or snapshot_times(rec))
-            for path, rec in zip(files, records, strict=True)}
+    return {
+        f"regions_{path.stem}": regions_figure(rec, list(pc.times) or snapshot_times(rec))
+        for path, rec in zip(files, records, strict=True)
+    }
 
 
 def _timing_tables(run_dir: Path) -> dict[str, str]:
@@ -65,7 +74,7 @@ def _timing_tables(run_dir: Path) -> dict[str, str]:
         raise StafpipeError(f"plot.run_dir: {run_dir} holds no results.parquet (is it an eval run?)")
     try:
         results = pd.read_parquet(path)
-    except Exception as exc:  # pyarrow raises several kinds for a damaged file
+    except Exception as exc:  # noqa: BLE001 (pyarrow raises several kinds for a damaged file)
         raise StafpipeError(f"plot.run_dir: {path} is not a readable table ({type(exc).__name__})") from None
     table = timing_table(results)
     scen = ", ".join(sorted(set(results["scenario"].astype(str)))) if "scenario" in results else "?"
@@ -89,8 +98,11 @@ def _is_papers_corridor(run_dir: Path) -> bool:
 
     if not (run_dir / "config.yaml").is_file():
         return False
-    run = OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml")).get("scenario") or {}
+    loaded = OmegaConf.to_container(OmegaConf.load(run_dir / "config.yaml"))
+    run = (loaded.get("scenario") if isinstance(loaded, dict) else None) or {}
     shipped = OmegaConf.to_container(OmegaConf.load(conf_dir() / "scenario" / "corridor.yaml"))
+    if not isinstance(shipped, dict):
+        return False
     return all(_floats(run.get(k)) == _floats(shipped.get(k)) for k in ("world", "obstacles"))
 
 
@@ -105,7 +117,7 @@ def _staf_tables(pc: PlotConfig) -> dict[str, str]:
             raise StafpipeError(f"plot.run_dirs: {d} holds no results.parquet (is it an eval run?)")
         try:
             frames.append(pd.read_parquet(path).assign(run=run, paper_cell=_is_papers_corridor(Path(d))))
-        except Exception as exc:  # pyarrow raises several kinds for a damaged file
+        except Exception as exc:  # noqa: BLE001 (pyarrow raises several kinds for a damaged file)
             raise StafpipeError(f"plot.run_dirs: {path} is not a readable table ({type(exc).__name__})") from None
     results = pd.concat(frames, ignore_index=True)
     table = summary_table(results)
@@ -130,7 +142,7 @@ def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     try:
         parts = pd.read_parquet(parts_path)
         summary = pd.read_parquet(summary_path) if summary_path.is_file() else None
-    except Exception as exc:  # pyarrow raises several kinds for a damaged file
+    except Exception as exc:  # noqa: BLE001 (pyarrow raises several kinds for a damaged file)
         raise StafpipeError(f"plot.run_dir: unreadable table in {run_dir} ({type(exc).__name__}: {exc})") from None
     missing = {"panel", "robot", "x", "y", "goal_x", "goal_y", "subteam"} - set(parts.columns)
     if missing:
@@ -142,15 +154,16 @@ def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
 
 
 def _training_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
-    """Learning curves of a train-ppo run (learning_curves.parquet) or loss curves of a train-high run (losses.parquet)."""
+    """Learning curves of a train-ppo run (learning_curves.parquet) or loss curves of a train-high run
+    (losses.parquet)."""
     from stafpipe.plots.training import loss_curve_figure, ppo_figure
 
     for name, draw in (("learning_curves", ppo_figure), ("losses", loss_curve_figure)):
         path = run_dir / f"{name}.parquet"
         if path.is_file():
             try:
-                history = pd.read_parquet(path).to_dict("records")
-            except Exception as exc:  # pyarrow raises several kinds for a damaged file
+                history: list[dict[str, float]] = pd.read_parquet(path).to_dict("records")  # type: ignore[assignment]
+            except Exception as exc:  # noqa: BLE001 (pyarrow raises several kinds for a damaged file)
                 raise StafpipeError(f"plot.run_dir: {path} is not a readable table ({type(exc).__name__})") from None
             return {name: draw(history)}
     raise StafpipeError(f"plot.run_dir: {run_dir} holds no learning_curves.parquet or losses.parquet (a training run?)")
@@ -158,7 +171,7 @@ def _training_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
 
 def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
-    pc: PlotConfig = OmegaConf.to_object(cfg.plot)  # type: ignore[assignment]
+    pc = section(cfg.plot, PlotConfig)
     pc.check()
     run_dir = Path(pc.run_dir or pc.run_dirs[0])
     for d in [run_dir, *map(Path, pc.run_dirs)]:
@@ -168,7 +181,7 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     if pc.kind in ("timing", "table"):
         tables = _timing_tables(run_dir) if pc.kind == "timing" else _staf_tables(pc)  # all read before any write
         for name, text in tables.items():
-            outputs.append(atomic_write(out_dir / name, lambda tmp, text=text: tmp.write_text(text)))
+            outputs.append(atomic_write(out_dir / name, lambda tmp, text=text: tmp.write_text(text)))  # type: ignore[misc]
         if pc.kind == "table":  # Fig. 8(e) beside the table
             from stafpipe.plots.staf_tables import cfi_sigma_figure
 
@@ -177,12 +190,18 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
             if "label" in table and table["label"].astype(str).str.len().gt(0).any():  # variants: the levels figure
                 from stafpipe.plots.levels import levels_figure
 
-                outputs += save_figure(levels_figure(table.fillna({"label": ""})), out_dir / "levels", pc.formats,
-                                       pc.dpi)
+                outputs += save_figure(
+                    levels_figure(table.fillna({"label": ""})), out_dir / "levels", pc.formats, pc.dpi
+                )
         print("\n".join(str(p) for p in outputs))
         return outputs
-    draw = {"trajectories": _trajectory_figures, "partitions": _partition_figures, "training": _training_figures,
-            "connectivity": _connectivity_figures, "regions": _region_figures}[pc.kind]
+    draw = {
+        "trajectories": _trajectory_figures,
+        "partitions": _partition_figures,
+        "training": _training_figures,
+        "connectivity": _connectivity_figures,
+        "regions": _region_figures,
+    }[pc.kind]
     for name, fig in draw(pc, run_dir).items():
         outputs += save_figure(fig, out_dir / name, pc.formats, pc.dpi)
         log.info("drew %s", name)

@@ -11,19 +11,21 @@ import logging
 from pathlib import Path
 
 import pandas as pd
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.errors import StafpipeError
 from stafpipe.highlevel.config import HighLevelConfig, TrainHighConfig
 from stafpipe.io import save_figure, write_table
+from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
 REQUIRED_COLUMNS = ("instance", "robot", "x", "y", "goal_x", "goal_y")
 
 
 def load_formations(path: str) -> pd.DataFrame:
-    """A `formations.parquet` (or CSV) of `stafpipe generate`, or the run directory holding one; checked for its columns."""
+    """A `formations.parquet` (or CSV) of `stafpipe generate`, or the run directory holding one; checked for its
+    columns."""
     p = Path(path)
     if p.is_dir():
         p = p / "formations.parquet"
@@ -31,7 +33,7 @@ def load_formations(path: str) -> pd.DataFrame:
         raise StafpipeError(f"train_high.data: no such file: {p}")
     try:
         df = pd.read_parquet(p) if p.suffix == ".parquet" else pd.read_csv(p)
-    except Exception as exc:  # pyarrow and pandas raise several kinds for a damaged file
+    except Exception as exc:  # noqa: BLE001 (pyarrow and pandas raise several kinds for a damaged file)
         raise StafpipeError(f"train_high.data: {p} is not a readable table ({type(exc).__name__}: {exc})") from None
     missing = [c for c in REQUIRED_COLUMNS if c not in df.columns]
     if missing:
@@ -49,8 +51,8 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.stages.generate import generate_instances
     from stafpipe.tensorboard_log import TB_DIR, ScalarLog
 
-    high: HighLevelConfig = OmegaConf.to_object(cfg.high)  # type: ignore[assignment]
-    tc: TrainHighConfig = OmegaConf.to_object(cfg.train_high)  # type: ignore[assignment]
+    high = section(cfg.high, HighLevelConfig)
+    tc = section(cfg.train_high, TrainHighConfig)
     high.check()
     tc.check()
     if max(tc.m_choices) > high.m_max:
@@ -58,8 +60,8 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     if tc.data:
         df = load_formations(tc.data)
     else:
-        data: DataConfig = OmegaConf.to_object(cfg.data)  # type: ignore[assignment]
-        formation: FormationConfig = OmegaConf.to_object(cfg.formation)  # type: ignore[assignment]
+        data = section(cfg.data, DataConfig)
+        formation = section(cfg.formation, FormationConfig)
         df = generate_instances(data, formation, int(cfg.seed))
     teams = teams_from_frame(df, 2)  # m is drawn per epoch in training
     graphs = [team_graph(t, high.features, high.radius) for t in teams]

@@ -22,6 +22,7 @@ from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.paths import conf_dir
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
+from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
 
@@ -83,21 +84,28 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.training_record import commit
     from stafpipe.world import WorldConfig
 
-    tc: TrainPPOConfig = OmegaConf.to_object(cfg.train_ppo)  # type: ignore[assignment]
+    tc = section(cfg.train_ppo, TrainPPOConfig)
     tc.check()
-    world_cfg: WorldConfig = OmegaConf.to_object(cfg.world)  # type: ignore[assignment]
-    sensing: SensingConfig = OmegaConf.to_object(cfg.sensing)  # type: ignore[assignment]
+    world_cfg = section(cfg.world, WorldConfig)
+    sensing = section(cfg.sensing, SensingConfig)
     pool = [with_overrides(load_named_scenario(name), cfg) for entry in tc.scenarios for name in scenario_files(entry)]
     if tc.formations:  # every scenario with every formation of the curriculum
-        pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
-                for s in pool for kind in tc.formations]
+        pool = [
+            build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
+            for s in pool
+            for kind in tc.formations
+        ]
     if tc.team_sizes:
-        pool = [build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, n=n)))
-                for s in pool for n in tc.team_sizes]
+        pool = [
+            build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, n=n)))
+            for s in pool
+            for n in tc.team_sizes
+        ]
     test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
     if test_maps:
-        log.warning("train_ppo.scenarios include the built-in test maps %s: results on them are not held out",
-                    test_maps)
+        log.warning(
+            "train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps
+        )
     drawn = [(s, *path_and_width(s)) for s in progress(pool, desc="train-ppo: maps", unit="map")]
     # a batch of worlds shares the team size and the robot: one such group per iteration
     groups: dict[str, list] = {}
@@ -125,20 +133,39 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         board.write(history[-1])
 
     try:
-        policy, history = train_ppo(tc, draw, world_cfg, sensing, float(cfg.eval.goal_tolerance), int(cfg.seed),
-                                    out_dir, digest, resume_from, on_iteration)
+        policy, history = train_ppo(
+            tc,
+            draw,
+            world_cfg,
+            sensing,
+            float(cfg.eval.goal_tolerance),
+            int(cfg.seed),
+            out_dir,
+            digest,
+            resume_from,
+            on_iteration,
+        )
     finally:
         board.close()
-    made_by = {"train_ppo": OmegaConf.to_container(cfg.train_ppo, resolve=True), "seed": int(cfg.seed),
-               "sensing": OmegaConf.to_container(cfg.sensing, resolve=True),
-               "world": OmegaConf.to_container(cfg.world, resolve=True),
-               "training_maps": sorted({s.name for s in pool}),
-               "commit": commit(), "iterations": len(history), "final": history[-1] if history else {}}
+    made_by = {
+        "train_ppo": OmegaConf.to_container(cfg.train_ppo, resolve=True),
+        "seed": int(cfg.seed),
+        "sensing": OmegaConf.to_container(cfg.sensing, resolve=True),
+        "world": OmegaConf.to_container(cfg.world, resolve=True),
+        "training_maps": sorted({s.name for s in pool}),
+        "commit": commit(),
+        "iterations": len(history),
+        "final": history[-1] if history else {},
+    }
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
     outputs += sorted((out_dir / TB_DIR).iterdir())
     outputs += write_table(pd.DataFrame(history), curves)
     outputs += save_figure(ppo_figure(history), curves, dpi=120)
     last = history[-1]
-    log.info("iteration %d: success rate %.3f, return %.2f", last["iteration"], last["charts/success_rate"],
-             last["charts/episode_return"])
+    log.info(
+        "iteration %d: success rate %.3f, return %.2f",
+        last["iteration"],
+        last["charts/success_rate"],
+        last["charts/episode_return"],
+    )
     return outputs

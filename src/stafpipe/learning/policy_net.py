@@ -1,0 +1,27 @@
+"""What every learned method's network offers the trainer, the controller and the exporter (one interface, so the
+trainer has no method-name branches): a Gaussian policy over velocity commands with a value head."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from stafpipe.learning.config import PolicyConfig
+
+
+class PolicyNet(nn.Module):
+    """Base of DGNNPolicy and StafPolicy: `forward` gives the action mean (.., n, 2) and the value (.., n) from own
+    (.., n, F), edge (.., n, n, E) and mask (.., n, n); `act` the mean alone; `distribution` the Gaussian around a
+    mean with the learned, state-independent standard deviation."""
+
+    cfg: PolicyConfig
+    log_std: nn.Parameter
+
+    def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        raise NotImplementedError
+
+    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
+        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
