@@ -124,7 +124,7 @@ class StafAdapter(Adapter):
         for scenario, path in self._paths:
             if scenario is team.scenario:
                 return path
-        self._paths.append((team.scenario, centred_path(team.scenario, Geometry(team.scenario), team.passage_width)))
+        self._paths.append((team.scenario, centred_path(team.scenario, Geometry.of(team.scenario), team.passage_width)))
         return self._paths[-1][1]
 
     def begin(self, teams: list[TeamInfo], teacher: bool = False) -> None:

@@ -86,7 +86,7 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     world_cfg = section(cfg.world, WorldConfig)
     sensing = section(cfg.sensing, SensingConfig)
     method_cfg: Any = OmegaConf.to_object(cfg.method)
-    geometry = Geometry(scenario)
+    geometry = Geometry.of(scenario)
     rows, outputs = [], []
     for k in progress(range(ev.episodes), desc=f"eval {method_cfg.name} on {scenario.name}", unit="episode"):
         seed = episode_seed(int(cfg.seed), k)

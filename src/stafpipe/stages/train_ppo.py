@@ -58,7 +58,7 @@ def path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
     from stafpipe.geometry import Geometry
     from stafpipe.sensing import SensingConfig
 
-    ctx, path = episode_context(scenario, Geometry(scenario), SensingConfig(), 0.3, 0.0)
+    ctx, path = episode_context(scenario, Geometry.of(scenario), SensingConfig(), 0.3, 0.0)
     return path, ctx.passage_width
 
 
