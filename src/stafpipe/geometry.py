@@ -8,8 +8,10 @@ exact up to that resolution (1/1200 of the world's larger side by default).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 from matplotlib.path import Path as MplPath
@@ -69,6 +71,13 @@ class Geometry:
             w = self.scenario.spec.world
             self.resolution = max(w.xmax - w.xmin, w.ymax - w.ymin) / 1200.0
         self._paths: dict[tuple[tuple[float, float], tuple[float, float], float], np.ndarray] = {}
+        self._memo: dict[Any, Any] = {}
+
+    def remember(self, key: Any, compute: Callable[[], Any]) -> Any:
+        """`compute()` once per `key` for this scenario content (e.g. a plan's clearance profile along its path)."""
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
 
     @classmethod
     def of(cls, scenario: Scenario) -> Geometry:
@@ -98,6 +107,10 @@ class Geometry:
     def passage_width(self, start: tuple[float, float], goal: tuple[float, float]) -> float:
         """Narrowest passage on the way from start to goal (STAF's eta): twice the bottleneck clearance of the route
         that keeps farthest from obstacles, i.e. the widest disc that can travel from start to goal."""
+        key = ("passage", float(start[0]), float(start[1]), float(goal[0]), float(goal[1]))
+        return float(self.remember(key, lambda: self._passage_width(start, goal)))
+
+    def _passage_width(self, start: tuple[float, float], goal: tuple[float, float]) -> float:
         _, _, clear = self.grid
         s, g = self._cell(start), self._cell(goal)
         lo, hi = 0.0, float(min(clear[s], clear[g]))
