@@ -93,22 +93,35 @@ def _heading(vel: np.ndarray, default: float) -> float:
     return math.atan2(v[1], v[0]) if np.linalg.norm(v) > 0.05 else default
 
 
-def cfi_terms(traj: Trajectory, ctx: MetricContext) -> tuple[np.ndarray, np.ndarray]:
+def _group_terms(
+    traj: Trajectory, ctx: MetricContext, k: int, idx: np.ndarray, memo: dict | None = None
+) -> tuple[float, float]:
+    """(diameter 2r, epsilon) of the robots `idx` at sample k; `memo` shares them between the team's CFI and the
+    subteams' (Table 2), which judge the same groups at the same samples."""
+    key = (k, idx.tobytes())
+    if memo is not None and key in memo:
+        return memo[key]
+    p = traj.positions[k, idx]
+    diam = 2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius)
+    heading = _heading(traj.velocities[k, idx], math.radians(ctx.heading_deg))
+    terms = diam, formation_integrity(p, ctx.formation, ctx.spacing, heading, ctx.angle_deg)
+    if memo is not None:
+        memo[key] = terms
+    return terms
+
+
+def cfi_terms(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per (sample, subteam): the team's diameter 2 r (r = max distance of a robot's edge from the subteam's centroid)
     and its integrity epsilon. Returns flat arrays (diameter, epsilon)."""
-    diam, eps = [], []
-    default = math.radians(ctx.heading_deg)
-    for k in range(len(traj.time)):
-        for team in np.unique(traj.subteams[k]):
-            idx = np.flatnonzero(traj.subteams[k] == team)
-            p = traj.positions[k, idx]
-            diam.append(2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius))
-            heading = _heading(traj.velocities[k, idx], default)
-            eps.append(formation_integrity(p, ctx.formation, ctx.spacing, heading, ctx.angle_deg))
-    return np.array(diam), np.array(eps)
+    terms = [
+        _group_terms(traj, ctx, k, np.flatnonzero(traj.subteams[k] == team), memo)
+        for k in range(len(traj.time))
+        for team in np.unique(traj.subteams[k])
+    ]
+    return np.array([d for d, _ in terms]), np.array([e for _, e in terms])
 
 
-def subteam_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
+def subteam_metrics(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) -> dict[str, float]:
     """STAF Table 2 (STAF-sub1, STAF-sub2, ...): SR, TT and CFI of each subteam of the team's first split, subteams
     numbered by their id (STAF's plan numbers them in the order they pass). SR and TT as for the team, over the
     subteam's robots (goal slots matched over the whole team); CFI over the samples while the team is split. Empty
@@ -121,7 +134,6 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     for _, a, b in traj.collisions:
         hit[[a, b] if b >= 0 else [a]] = True
     matched = np.stack([matched_goal_distance(p, traj.team_goal) for p in traj.positions])  # (T+1, n)
-    default = math.radians(ctx.heading_deg)
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
     out: dict[str, float] = {}
     for j, team in enumerate(np.unique(labels)):
@@ -129,17 +141,10 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
         done = np.flatnonzero((matched[:, idx] <= ctx.goal_tolerance).all(axis=1))
         out[f"sub{j + 1}_sr"] = float(np.mean((matched[-1, idx] <= ctx.goal_tolerance) & ~hit[idx]))
         out[f"sub{j + 1}_tt"] = float(traj.time[done[0]]) if len(done) else math.nan
-        diam, eps = [], []
-        for k in split:
-            p = traj.positions[k, idx]
-            diam.append(2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius))
-            eps.append(
-                formation_integrity(
-                    p, ctx.formation, ctx.spacing, _heading(traj.velocities[k, idx], default), ctx.angle_deg
-                )
-            )
+        terms = [_group_terms(traj, ctx, k, idx, memo) for k in split]
+        diam, eps = np.array([d for d, _ in terms]), np.array([e for _, e in terms])
         for sigma in CFI_SIGMAS:
-            out[f"sub{j + 1}_cfi_{sigma:g}"] = cfi(np.array(diam), np.array(eps), eta, sigma)
+            out[f"sub{j + 1}_cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
     return out
 
 
@@ -179,7 +184,8 @@ def connectivity(positions: np.ndarray, radius: float) -> tuple[np.ndarray, np.n
 def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     """Every metric of one episode, as a flat dict (one row of the results table)."""
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
-    diam, eps = cfi_terms(traj, ctx)
+    memo: dict = {}
+    diam, eps = cfi_terms(traj, ctx, memo)
     links, lam2 = connectivity(traj.positions, ctx.sensing_radius)
     pos = traj.positions
     n = pos.shape[1]
@@ -209,5 +215,5 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
         out[f"cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
     for sigma in CFI_SIGMAS:
         out[f"cfi_printed_{sigma:g}"] = cfi_printed(diam, eps, eta, sigma)
-    out.update(subteam_metrics(traj, ctx))
+    out.update(subteam_metrics(traj, ctx, memo))
     return out
