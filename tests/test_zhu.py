@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from stafpipe.controllers.zhu import ZhuConfig, ZhuController, ZhuFault
+from stafpipe.controllers.zhu import ZhuConfig, ZhuController
 from stafpipe.controllers.zhu_decisions import (
     StuckDetector,
     comm_components,
@@ -25,6 +25,7 @@ from stafpipe.controllers.zhu_decisions import (
 from stafpipe.convex_region import fit_centres, grow_halfplanes, intersect_all, regions_from_halfplanes
 from stafpipe.episode import run_episode
 from stafpipe.errors import ConfigError
+from stafpipe.faults import Fault
 from stafpipe.geometry import Geometry
 from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
 from stafpipe.sensing import SensingConfig
@@ -145,18 +146,20 @@ def _open_lane(n: int = 4) -> ScenarioConfig:
     )
 
 
-def _events(faults: list[ZhuFault]) -> tuple[list[tuple[str, list[int]]], dict[str, float]]:
-    """Run an open-lane episode with `faults`; the events it decided (without the region snapshots) and its metrics."""
+def _events(faults: list[Fault]) -> tuple[list[tuple[str, list[int]]], dict[str, float]]:
+    """Run an open-lane episode with `faults` injected by the world; the events Zhu's method decided (without the
+    region snapshots) and its metrics."""
     scenario = build_scenario(_open_lane())
-    controller = ZhuController(ZhuConfig(faults=faults))
+    controller = ZhuController(ZhuConfig())
+    world = WorldConfig(faults=faults)
     values = run_episode(
-        scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig(radius=3.0)
+        scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, world, SensingConfig(radius=3.0)
     )
     return [(e.kind, e.robots) for e in controller.drain_events() if e.kind != "regions"], values
 
 
 def test_a_stuck_robot_is_flagged_exactly_left_behind_and_merges_back_after_recovering() -> None:
-    kinds, values = _events([ZhuFault(robot=1, kind="stuck", start=3.0, end=8.0)])
+    kinds, values = _events([Fault(robot=1, kind="stuck", start=3.0, end=8.0)])
     assert ("stuck", [1]) in kinds
     assert all(r == [1] for k, r in kinds if k == "stuck")  # nobody else is flagged
     assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("stuck", [1])) :]  # it rejoins after the fault
@@ -164,7 +167,7 @@ def test_a_stuck_robot_is_flagged_exactly_left_behind_and_merges_back_after_reco
 
 
 def test_a_silent_robot_is_dropped_and_rejoins_when_it_talks_again() -> None:
-    kinds, values = _events([ZhuFault(robot=2, kind="comm", start=3.0, end=8.0)])
+    kinds, values = _events([Fault(robot=2, kind="silent", start=3.0, end=8.0)])
     assert ("comm_loss", [2]) in kinds
     assert all(r == [2] for k, r in kinds if k == "comm_loss")
     assert ("merge", [0, 1, 2, 3]) in kinds[kinds.index(("comm_loss", [2])) :]
@@ -213,8 +216,6 @@ def test_timings_per_part_are_reported() -> None:
         ("v_min", 500.0, "larger than any region"),
         ("p_max", 0.0, "p_max"),
         ("scales", [1.5], "scales"),
-        ("faults", [ZhuFault(kind="fire")], "faults[0].kind"),
-        ("faults", [ZhuFault(start=5.0, end=2.0)], "faults[0]"),
     ],
 )
 def test_bad_settings_are_refused_with_the_key(field: str, value: object, needle: str) -> None:
@@ -223,18 +224,7 @@ def test_bad_settings_are_refused_with_the_key(field: str, value: object, needle
 
 
 def test_a_fault_on_a_robot_that_does_not_exist_is_refused() -> None:
-    from stafpipe.controllers.base import TeamInfo
+    from stafpipe.world import Worlds
 
-    scenario = build_scenario(_open_lane())
-    controller = ZhuController(ZhuConfig(faults=[ZhuFault(robot=7)]))
-    with pytest.raises(ConfigError, match=r"faults\[0\].robot"):
-        controller.reset(
-            TeamInfo(
-                scenario,
-                np.zeros((4, 2)),
-                np.zeros((4, 2)),
-                scenario.template(),
-                np.array([[3.0, 0.0], [30.0, 0.0]]),
-                10.0,
-            )
-        )
+    with pytest.raises(ConfigError, match=r"world.faults\[0\].robot"):
+        Worlds([build_scenario(_open_lane())], SensingConfig(), WorldConfig(faults=[Fault(robot=7)]))

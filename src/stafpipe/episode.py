@@ -15,6 +15,7 @@ from omegaconf import OmegaConf
 
 from stafpipe.controllers import Controller, TeamInfo
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
+from stafpipe.faults import ROBOT_FAULTS
 from stafpipe.geometry import Geometry, capsule_arrays, closest_points, path_length
 from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
@@ -156,13 +157,21 @@ def run_episode(
             for e in controller.drain_events():
                 log.event(times[-1], step, e.kind, e.robots, e.detail)
 
+    def log_faults(step: int) -> None:
+        for kind, fault in worlds.fault_events:
+            robots = [fault.robot] if fault.kind in ROBOT_FAULTS else []
+            if log:
+                log.event(times[-1], step, kind, robots, fault.describe())
+
     record(0)
+    log_faults(0)
     steps = int(round(scenario.spec.time_limit / world_cfg.control_dt))
     for step in range(1, steps + 1):
         actions = controller.act(obs)
         obs_b, events = worlds.step(actions[None])
         obs = obs_b.world(0)
         record(step)
+        log_faults(step)
         for c in events[0]:
             collisions.append((step, c.a, c.b))
             if log:

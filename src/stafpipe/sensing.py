@@ -30,7 +30,9 @@ class SensingConfig:
     occlusion: bool = False
     """Robots hide the robots behind them (Cezayirli Section II)."""
     drop_prob: float = 0.0
-    """Probability that a neighbour's message is lost in a control step (Zhu's communication faults)."""
+    """Probability that a robot misses a neighbour in a control step (a detection dropout: neither sensed nor heard,
+    STAF Fig. 14's noise study). Lost messages alone (the neighbour still sensed) are the world's `drop` fault
+    (`world.faults`, docs/faults.md)."""
 
     def check(self, key: str = "sensing") -> None:
         from stafpipe.errors import require
@@ -57,7 +59,8 @@ class Observation(NamedTuple):
     obstacle_distance: np.ndarray
     """(.., n) distance from the robot's surface to the closest obstacle."""
     neighbours: np.ndarray
-    """(.., n, n) bool, [i, j]: robot i sees/hears robot j."""
+    """(.., n, n) bool, [i, j]: robot i senses robot j (within range; occlusion, noise and sensing.drop_prob
+    applied)."""
     rel_position: np.ndarray
     """(.., n, n, 2) [i, j]: measured position of j relative to i (valid where neighbours)."""
     rel_velocity: np.ndarray
@@ -67,6 +70,9 @@ class Observation(NamedTuple):
     movers: np.ndarray
     """(.., M, 4) moving obstacles: x, y, vx, vy (a walking human tracked by motion capture, Zhu et al. 2019 Section
     V-B); padding rows of a batch are far away and still."""
+    heard: np.ndarray
+    """(.., n, n) bool, [i, j]: robot i receives robot j's messages: the sensed neighbours, less what the world's
+    `silent` and `drop` faults take away (stafpipe.faults). What communicating methods use as their graph."""
 
     def world(self, b: int) -> Observation:
         """The observation of world `b` of a batch."""
@@ -140,4 +146,6 @@ def observe(
             mask &= np.stack([r.random(dist.shape[1:]) >= cfg.drop_prob for r in rngs])
     rel_vel = vel[..., None, :, :] - vel[..., :, None, :]
     movers = np.zeros((pos.shape[0], 0, 4)) if movers is None else movers
-    return Observation(own, vel, heading, goal, obstacle, obstacle_distance, mask, measured, rel_vel, time, movers)
+    return Observation(
+        own, vel, heading, goal, obstacle, obstacle_distance, mask, measured, rel_vel, time, movers, mask.copy()
+    )

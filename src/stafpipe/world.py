@@ -18,6 +18,8 @@ from pymunk._chipmunk import ffi as _ffi
 from pymunk._chipmunk import lib as _cp
 
 from stafpipe.drives import DRIVES
+from stafpipe.errors import ConfigError
+from stafpipe.faults import Fault, drop_probability, robots_hit, transitions
 from stafpipe.formations import place
 from stafpipe.geometry import capsule_arrays
 from stafpipe.scenario import Scenario
@@ -44,6 +46,9 @@ class WorldConfig:
     machine)."""
     start_noise: float = 0.05
     """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
+    faults: list[Fault] = field(default_factory=list)
+    """Faults the world and its sensing inject (stafpipe.faults: stuck, silent, drop, dropout), the same for every
+    method; e.g. `world.faults=[{kind: stuck, robot: 3, start: 8}]` or `experiment=fault_stuck`."""
 
     def check(self, key: str = "world") -> None:
         from stafpipe.errors import require
@@ -52,6 +57,8 @@ class WorldConfig:
         require(self.substeps >= 1, f"{key}.substeps", "must be >= 1", self.substeps)
         require(self.collision_slop >= 0, f"{key}.collision_slop", "must be >= 0", self.collision_slop)
         require(self.start_noise >= 0, f"{key}.start_noise", "must be >= 0", self.start_noise)
+        for k, fault in enumerate(self.faults):
+            fault.check(f"{key}.faults[{k}]")
 
 
 @dataclass
@@ -189,6 +196,12 @@ class Worlds:
         if any(s.spec.robot != self.robot for s in scenarios):
             raise ValueError("all worlds of a batch need the same robot")
         self.drive = DRIVES[self.robot.drive]
+        self.faults = list(self.cfg.faults)
+        for k, fault in enumerate(self.faults):
+            if fault.robot >= self.n and fault.kind != "drop":
+                raise ConfigError(f"world.faults[{k}].robot must be a robot index in [0, {self.n}), got {fault.robot}")
+        self.fault_events: list[tuple[str, Fault]] = []
+        """Faults that began or ended during the last reset or step (the same in every world: one clock)."""
         self.spaces = [_build_space(s, self.n, self.cfg) for s in scenarios]
         caps = [capsule_arrays(s) for s in scenarios]
         c_max = max(len(c[2]) for c in caps) + max(len(s.spec.moving_obstacles) for s in scenarios)
@@ -206,6 +219,8 @@ class Worlds:
         self.time = np.zeros(b)
         self.collided = np.zeros((b, self.n), dtype=bool)
         self.rngs = [np.random.default_rng(0) for _ in scenarios]
+        self.fault_rngs = [np.random.default_rng(0) for _ in scenarios]
+        """Lost messages are drawn from their own streams: a drop fault leaves the sensing noise as it was."""
         self._mover_state: list[list[tuple[np.ndarray, int]]] = [[] for _ in scenarios]
         self._has_movers = [w for w, (_, specs) in enumerate(self._mover_slots) if specs]
         self.movers = np.zeros((b, max(len(specs) for _, specs in self._mover_slots), 4))
@@ -227,6 +242,7 @@ class Worlds:
             h = math.radians(team.heading_deg)
             rng = np.random.default_rng(seed)
             self.rngs[w] = rng
+            self.fault_rngs[w] = np.random.default_rng([seed, 1])
             jitter = np.clip(
                 rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise
             )
@@ -246,6 +262,7 @@ class Worlds:
                 self._mover_state[w].append((np.array(m.waypoints, dtype=float), 1 % len(m.waypoints)))
             sp.events.clear()
         self._update_movers()
+        self.fault_events = transitions(self.faults, -1.0, 0.0)
         return self.observe()
 
     def _update_movers(self) -> None:
@@ -274,7 +291,10 @@ class Worlds:
         Returns the new observations and, per world, the contacts that began during the step.
         """
         dt = self.cfg.control_dt
-        self.vel, self.heading = self.drive(np.asarray(actions, float), self.vel, self.heading, self.robot, dt)
+        actions = np.array(actions, dtype=float)
+        if self.faults:  # a stuck robot's actuators ignore its command
+            actions[:, robots_hit(self.faults, "stuck", float(self.time[0]), self.n)] = 0.0
+        self.vel, self.heading = self.drive(actions, self.vel, self.heading, self.robot, dt)
         events: list[list[Collision]] = []
         n, substeps = self.n, self.cfg.substeps
         for w, sp in enumerate(self.spaces):
@@ -295,12 +315,32 @@ class Worlds:
         state = np.stack([sp.io.state[:n] for sp in self.spaces])
         self.pos, self.vel = state[..., :2].copy(), state[..., 2:].copy()
         self.time += dt
+        if self.faults:
+            self.fault_events = transitions(self.faults, float(self.time[0]) - dt, float(self.time[0]))
         if self._has_movers:
             self._update_movers()
         return self.observe(), events
 
     def observe(self) -> Observation:
-        """Observations of every robot of every world."""
+        """Observations of every robot of every world, with the active sensing and communication faults applied."""
+        obs = self._sense()
+        if not self.faults:
+            return obs
+        t, n = float(self.time[0]), self.n
+        others = ~np.eye(n, dtype=bool)
+        blind = robots_hit(self.faults, "dropout", t, n)  # they sense nothing (but still talk)
+        obs.neighbours[:, blind, :] = False
+        far = np.stack([np.cos(obs.heading), np.sin(obs.heading)], axis=-1) * 1e3
+        obs.obstacle[:, blind] = far[:, blind]
+        obs.obstacle_distance[:, blind] = 1e3
+        silent = robots_hit(self.faults, "silent", t, n)  # nobody hears them
+        obs.heard[..., silent] &= ~others[:, silent]
+        p = drop_probability(self.faults, t)
+        if p > 0:
+            obs.heard[...] &= np.stack([r.random((n, n)) >= p for r in self.fault_rngs])
+        return obs
+
+    def _sense(self) -> Observation:
         return observe(
             self.pos,
             self.vel,

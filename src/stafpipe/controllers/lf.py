@@ -63,15 +63,22 @@ class LFController(Controller):
         except ValueError:  # no path with the margin: fall back to the straight line (it will get stuck, honestly)
             self.path = np.array([start, goal])
         self.goal = team.goal
+        self.lead_heard = np.array(team.start[self.leader], dtype=float)
 
     def act(self, obs: Observation) -> np.ndarray:
         cfg, p = self.cfg, obs.position
-        lead = p[self.leader]
+        # The leader broadcasts its position; the team relays it (range-free, as Reily et al.'s leader is followed by
+        # all). When robots that sense the leader do not hear it (a silent leader, dropped messages: the world's
+        # faults), the followers go on with the last position they received.
+        others = np.arange(len(p)) != self.leader
+        if obs.heard[others, self.leader].any() or not obs.neighbours[others, self.leader].any():
+            self.lead_heard = p[self.leader].copy()
+        lead = p[self.leader]  # the leader knows where it is
         points, directions, _ = point_ahead(self.path, lead[None], cfg.lookahead)
         point, direction = points[0], directions[0]
         if np.linalg.norm(self.goal[self.leader] - lead) > cfg.lookahead:
             self.heading = math.atan2(direction[1], direction[0])  # the formation turns with the leader's path
-        slots = lead + (self.slots - self.slots[self.leader]) @ rotation(self.heading).T
+        slots = self.lead_heard + (self.slots - self.slots[self.leader]) @ rotation(self.heading).T
         at_goal = np.linalg.norm(self.goal[self.leader] - lead) < 0.5 * cfg.lookahead
         if at_goal:  # the leader has arrived: everyone takes its own goal slot
             slots = self.goal

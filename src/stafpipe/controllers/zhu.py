@@ -11,8 +11,9 @@ proportional controller with the shared collision-avoidance cap tracks the slots
 
 The robots' computations are identical given the flooded regions (Remark 1), so each team's decision is computed once
 here; the flooding itself is modelled by the connected components of the team's communication graph
-(`zhu_decisions.comm_components`). Faults are injected from `method.faults` (an actuator fault zeroes the robot's
-velocity, a communication fault silences it); detection never reads that list.
+(`zhu_decisions.comm_components`) over the links the world delivers (`Observation.heard`). Faults are injected by
+the world for every method (`world.faults`, stafpipe.faults: a stuck robot's actuators ignore their commands, a
+silent robot sends nothing); detection never reads that list.
 """
 
 from __future__ import annotations
@@ -51,20 +52,8 @@ from stafpipe.formations import assign_slots, formation_slots, rotation
 from stafpipe.geometry import capsule_arrays
 from stafpipe.sensing import Observation
 
-FAULT_KINDS = ("stuck", "comm")
 TIMED_PARTS = ("convex_regions", "split_check", "graph_partition", "merge_decision", "formation_control")
 """Table I's rows."""
-
-
-@dataclass
-class ZhuFault:
-    """An injected fault (Section IV-D): robot `robot` is stuck (actuators) or silent (communication) from `start`
-    until `end` seconds (`end: null` = permanent)."""
-
-    robot: int = 0
-    kind: str = "stuck"
-    start: float = 0.0
-    end: float | None = None
 
 
 @dataclass
@@ -121,7 +110,6 @@ class ZhuConfig:
     """Delta p_min (m): least progress towards its slot over n_dead steps (Section IV-D)."""
     stuck_near: float = 0.4
     """Steps taken within this distance (m) of the slot do not count for stuck detection (the robot is there)."""
-    faults: list[ZhuFault] = field(default_factory=list)
 
     def check(self, key: str = "method") -> None:
         require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)
@@ -165,14 +153,6 @@ class ZhuConfig:
             "must be >= 1 and > 0",
             (self.n_dead, self.dp_min),
         )
-        for k, f in enumerate(self.faults):
-            require(f.kind in FAULT_KINDS, f"{key}.faults[{k}].kind", f"must be one of {list(FAULT_KINDS)}", f.kind)
-            require(
-                f.start >= 0 and (f.end is None or f.end > f.start),
-                f"{key}.faults[{k}]",
-                "needs start >= 0 and end > start (or end: null)",
-                (f.start, f.end),
-            )
 
 
 def grid_slots(m: int, across: int, spacing: float) -> np.ndarray:
@@ -193,10 +173,6 @@ class ZhuController(Controller):
     def reset(self, team: TeamInfo) -> None:
         super().reset(team)
         cfg, spec = self.cfg, team.scenario.spec
-        for k, f in enumerate(cfg.faults):
-            require(
-                0 <= f.robot < self.n, f"method.faults[{k}].robot", f"must be a robot index in [0, {self.n})", f.robot
-            )
         self.radius, self.speed = spec.robot.radius, spec.robot.max_speed
         self.formation, self.spacing, self.angle = spec.team.formation, spec.team.spacing, spec.team.angle_deg
         self.static = capsule_arrays(team.scenario)
@@ -301,18 +277,9 @@ class ZhuController(Controller):
 
     # ---- one step ------------------------------------------------------------------------------------------------
 
-    def _active(self, kind: str, t: float) -> np.ndarray:
-        on = np.zeros(self.n, dtype=bool)
-        for f in self.cfg.faults:
-            if f.kind == kind and f.start <= t and (f.end is None or t < f.end):
-                on[f.robot] = True
-        return on
-
     def act(self, obs: Observation) -> np.ndarray:
         cfg, t, p = self.cfg, float(obs.time), obs.position
-        silent = self._active("comm", t)
-        comm = obs.neighbours & obs.neighbours.T  # r_C = sensing.radius; a silent robot neither sends nor receives
-        comm[silent], comm[:, silent] = False, False
+        comm = obs.heard & obs.heard.T  # r_C = sensing.radius; two-way links only (a silent robot has none)
         self._detect_stuck(p)
         if t + 1e-9 >= self.next_control:
             self.next_control += cfg.control_period
@@ -335,7 +302,6 @@ class ZhuController(Controller):
         speed = np.linalg.norm(v, axis=1, keepdims=True)
         v *= np.minimum(1.0, self.speed / np.maximum(speed, 1e-9))
         v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain, cfg.stop_gap)
-        v[self._active("stuck", t)] = 0.0  # the injected actuator fault
         return v
 
     @contextmanager

@@ -1,11 +1,9 @@
 """STAF's unsupervised subteaming loss, Eq. (1) (STAF, Section 3), per team of a batch.
 
-  L_st = Y(1 - Y)^T E  +  sum_j (sum_i y_ij - n/m)  +  sum_j || sum_i y_ij p_i / sum_i y_ij - sum_i y_ij g_i / sum_i
-  y_ij ||
+  L_st = Y(1 - Y)^T E + sum_j (sum_i y_ij - n/m) + sum_j || sum_i y_ij p_i / sum_i y_ij - sum_i y_ij g_i / sum_i y_ij ||
 
 As printed, the first term is an n x n matrix and the second is identically 0 for softmax rows; docs/method.md writes
-the
-printed and the used form side by side. Used (each term scaled to be comparable across team sizes):
+the printed and the used form side by side. Used (each term scaled to be comparable across team sizes):
   adjacency  trace(Y (1 - Y)^T E) / sum(E): the expected fraction of radius-graph edges cut
   balance    sum_{j<m} (sum_i y_ij - n/m)^2 / (n^2 (m - 1) / m): 0 when balanced, 1 with everyone in one subteam
   goal       sum_{j<m} (n_j / n) || c^p_j - c^g_j || / || p_bar - g_bar ||, n_j = sum_i y_ij: the size-weighted

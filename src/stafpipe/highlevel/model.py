@@ -6,8 +6,7 @@ Embedding omega (a graph attention network, [54] = GAT):
   h_i = W^h m_i + sum_{j in N(i)} alpha_ij W^h m_j       (Section 3; Appendix C: W^a, W^h are 32 x 32, three layers)
   with several heads per layer, averaged (the "multi-head mechanism [54]").
 Classifier tau: two linear layers and a softmax -> Y (n x m) (Section 3). Ours also sees m (one-hot), so that one
-network
-serves every m up to `m_max`; logits of subteams >= m are masked out.
+network serves every m up to `m_max`; logits of subteams >= m are masked out.
 """
 
 from __future__ import annotations

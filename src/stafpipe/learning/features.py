@@ -61,7 +61,7 @@ def features(obs: Observation, goal_clip: float, sensing_radius: float, target: 
     rel = to_robot_frame(obs.rel_position, cc, ss)
     rel_v = to_robot_frame(obs.rel_velocity, cc, ss)
     edge = np.concatenate([rel, rel_v, np.linalg.norm(rel, axis=-1, keepdims=True)], axis=-1)
-    mask = obs.neighbours
+    mask = obs.heard  # the communication graph: what neighbours sent (faults applied)
     return Features(own.astype(np.float32), np.where(mask[..., None], edge, 0.0).astype(np.float32), mask)
 
 
@@ -104,7 +104,7 @@ def staf_features(
         ],
         axis=-1,
     )
-    mask = obs.neighbours
+    mask = obs.heard  # the communication graph: what neighbours sent (faults applied)
     return Features(own.astype(np.float32), np.where(mask[..., None], diff, 0.0).astype(np.float32), mask)
 
 

@@ -1,10 +1,9 @@
 """`stafpipe generate`: synthetic formation instances that train STAF's high level.
 
-STAF Appendix C: "given a robot team formation, we randomly generate the positions of the
-robots within the formation. In total, we collect 10,000 data instances". Each instance is one team: a formation type
-and
-size, its slots scaled, rotated and moved, Gaussian noise on each robot, the same formation placed at a goal ahead, and
-the width of the narrowest passage ahead. The table schema is documented in docs/data.md.
+STAF Appendix C: "given a robot team formation, we randomly generate the positions of the robots within the formation.
+In total, we collect 10,000 data instances". Each instance is one team: a formation type and size, its slots scaled,
+rotated and moved, Gaussian noise on each robot, the same formation placed at a goal ahead, and the width of the
+narrowest passage ahead. The table schema is documented in docs/data.md.
 """
 
 from __future__ import annotations
