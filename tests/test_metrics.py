@@ -14,6 +14,7 @@ from stafpipe.metrics import (
     episode_metrics,
     success_rate,
     travel_time,
+    travel_time_of_arrivals,
 )
 
 
@@ -112,7 +113,25 @@ def test_success_rate_and_travel_time() -> None:
     assert travel_time(_traj(0.0), CTX) == pytest.approx(0.4)
     assert success_rate(_traj(1.0), CTX) == pytest.approx(2 / 3)
     assert math.isnan(travel_time(_traj(1.0), CTX))
+    goal = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    pos = np.stack([goal + [[0.0, 3 - k], [0.0, 3 - k], [0.0, 5.0]] for k in range(5)]).clip(None, 5.0)
+    pos[:, :2, 1] = np.maximum(pos[:, :2, 1], 0.0)  # robots 0 and 1 come down to their slots by 0.3 s; robot 2 never
+    two = Trajectory(np.arange(5) * 0.1, pos, np.zeros_like(pos), np.zeros((5, 3), int), goal, np.ones((5, 3)))
+    assert math.isnan(travel_time(two, CTX)) and travel_time_of_arrivals(two, CTX) == pytest.approx(0.3)
+    assert travel_time_of_arrivals(_traj(0.0), CTX) == travel_time(_traj(0.0), CTX)
+    stranded = _traj(0.0)
+    stranded.positions[-1] += 5.0
+    assert math.isnan(travel_time_of_arrivals(stranded, CTX))
     assert success_rate(_traj(0.0, [(2, 0, 1)]), CTX) == pytest.approx(1 / 3)
     assert success_rate(_traj(0.0, [(2, 2, -1)]), CTX) == pytest.approx(2 / 3)
     m = episode_metrics(_traj(0.0), CTX)
     assert m["tt_ratio"] == pytest.approx(2.0) and m["collisions"] == 0 and m["path_length"] == pytest.approx(4.0)
+
+
+def test_links_are_sensed_pairs_when_robots_hide_each_other() -> None:
+    """Cezayirli Fig. 4 counts sensed neighbours: with occlusion, a robot hidden behind another is no link."""
+    row = np.array([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]])[None]  # the middle robot hides the outer two from each other
+    assert connectivity(row, radius=10.0)[0][0] == 3
+    assert connectivity(row, radius=10.0, occlusion_radius=0.5)[0][0] == 2
+    apart = np.array([[0.0, 0.0], [2.0, 3.0], [4.0, 0.0]])[None]  # nobody in between
+    assert connectivity(apart, radius=10.0, occlusion_radius=0.5)[0][0] == 3

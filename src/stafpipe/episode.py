@@ -89,6 +89,7 @@ def episode_context(
         goal_tolerance=goal_tolerance,
         sensing_radius=sensing.radius,
         cfi_margin=cfi_margin,
+        occlusion=sensing.occlusion,
     )
     return ctx, path
 

@@ -51,7 +51,8 @@ def describe(path: str) -> tuple[str, bool]:
         kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
     lines.append("  events: " + (", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"))
     logged = rec.metrics if rec.metrics and rec.recovered is None else {}  # a partial episode has other metrics
-    equal = all(_same(recomputed[k], float(logged.get(k, math.nan))) for k in recomputed) if logged else True
+    # a metric added after the log was written is shown, not compared (the log cannot disagree with it)
+    equal = all(_same(recomputed[k], float(logged[k])) for k in recomputed if k in logged) if logged else True
     if rec.recovered is not None:
         lines.insert(1, f"  PARTIAL episode, recovered from a damaged log ({rec.recovered})")
     verdict = (
@@ -66,6 +67,9 @@ def describe(path: str) -> tuple[str, bool]:
     partial = "of the recovered part only, " if rec.recovered is not None else ""
     lines.append(f"  metrics ({partial}recomputed from the log; {verdict}):")
     for name, v in recomputed.items():
-        mark = "" if not logged or _same(v, float(logged.get(name, math.nan))) else f"   (logged {logged.get(name)})"
+        if logged and name not in logged:
+            mark = "   (not in the log: a newer metric)"
+        else:
+            mark = "" if not logged or _same(v, float(logged[name])) else f"   (logged {logged.get(name)})"
         lines.append(f"    {name:22s} {v:12.4f}{mark}")
     return "\n".join(lines), equal

@@ -56,6 +56,8 @@ class MetricContext:
     goal_tolerance: float = 0.3
     sensing_radius: float = 2.0
     cfi_margin: float = 0.1
+    occlusion: bool = False
+    """Whether robots hide robots behind them (`sensing.occlusion`): a link is then a pair that sense each other."""
     """Safety margin taken off each side of the passage: eta = passage_width - 2 margin (STAF Sec. 4 'with safety
     margin')."""
 
@@ -86,6 +88,18 @@ def travel_time(traj: Trajectory, ctx: MetricContext) -> float:
         if matched_goal_distance(traj.positions[k], traj.team_goal).max() <= ctx.goal_tolerance:
             return float(traj.time[k])
     return math.nan
+
+
+def travel_time_of_arrivals(traj: Trajectory, ctx: MetricContext) -> float:
+    """TT over the robots that arrive: the first time at which every robot that ends the episode at a goal slot is
+    within tolerance of one (equals TT when the whole team arrives; NaN when nobody does). STAF's Table 1 prints a TT
+    for L&F although its SR is 40-70 %: this is our reading of it (docs/metrics.md)."""
+    distance = np.stack([matched_goal_distance(p, traj.team_goal) for p in traj.positions])  # (T+1, n)
+    arrived = distance[-1] <= ctx.goal_tolerance
+    if not arrived.any():
+        return math.nan
+    done = np.flatnonzero((distance[:, arrived] <= ctx.goal_tolerance).all(axis=1))
+    return float(traj.time[done[0]])
 
 
 def _heading(vel: np.ndarray, default: float) -> float:
@@ -169,12 +183,21 @@ def cfi_printed(diameter: np.ndarray, epsilon: np.ndarray, eta: float, sigma: fl
     return float(np.mean(w * np.clip(gap, 0.0, 1.0) + (1.0 - w) * epsilon))
 
 
-def connectivity(positions: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample: number of undirected links within `radius` and algebraic connectivity lambda2 of that graph."""
+def connectivity(positions: np.ndarray, radius: float, occlusion_radius: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample: number of undirected links and algebraic connectivity lambda2 of that graph. A link: two robots
+    within `radius`; with `occlusion_radius` (the robots' radius, when sensing has occlusion) also each seeing the
+    other, no robot in between hiding any part of it (Cezayirli Section II: "partially occluded = occluded"), so the
+    graph is that of sensed neighbours, as Cezayirli Fig. 4 counts them."""
+    from stafpipe.sensing import occluded
+
     links, lam2 = [], []
     for p in positions:
-        d = np.linalg.norm(p[:, None] - p[None], axis=-1)
+        rel = p[None] - p[:, None]
+        d = np.linalg.norm(rel, axis=-1)
         adj = (d <= radius) & ~np.eye(len(p), dtype=bool)
+        if occlusion_radius > 0:
+            hidden = occluded(rel, d, occlusion_radius)
+            adj &= ~hidden & ~hidden.T
         links.append(int(adj.sum() // 2))
         lap = np.diag(adj.sum(axis=1)) - adj.astype(float)
         lam2.append(max(0.0, float(np.sort(np.linalg.eigvalsh(lap))[1])) if len(p) > 1 else 0.0)
@@ -186,7 +209,7 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
     memo: dict = {}
     diam, eps = cfi_terms(traj, ctx, memo)
-    links, lam2 = connectivity(traj.positions, ctx.sensing_radius)
+    links, lam2 = connectivity(traj.positions, ctx.sensing_radius, ctx.robot_radius if ctx.occlusion else 0.0)
     pos = traj.positions
     n = pos.shape[1]
     gaps = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1) + np.eye(n)[None] * 1e9
@@ -194,6 +217,7 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     out = {
         "sr": success_rate(traj, ctx),
         "tt": tt,
+        "tt_arrived": travel_time_of_arrivals(traj, ctx),
         "tt_lower_bound": ctx.travel_time_lower_bound,
         "tt_ratio": tt / ctx.travel_time_lower_bound if ctx.travel_time_lower_bound > 0 else math.nan,
         "eta": eta,

@@ -32,6 +32,7 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
 METRICS = (
     "sr",
     "tt",
+    "tt_arrived",
     *(f"cfi_{s:g}" for s in CFI_SIGMAS),
     *(f"cfi_printed_{s:g}" for s in CFI_SIGMAS),
     "tt_ratio",
@@ -60,6 +61,8 @@ def summary_table(results: pd.DataFrame, prefix: str = "") -> pd.DataFrame:
         row["eta"] = float(group["eta"].mean()) if "eta" in group else math.nan
         row["all_succeeded"] = float((group["sr"] >= 1.0).mean())
         for metric in METRICS:
+            if prefix and metric == "tt_arrived":  # a team-level reading; subteams have their own TT
+                continue
             column = f"{prefix}{metric}" if metric in ("sr", "tt") or metric.startswith("cfi") else metric
             if column in group:
                 row[metric], row[f"{metric}_ci95"] = _mean_ci(group[column])
@@ -86,6 +89,7 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         "episodes",
         "SR %",
         "TT s",
+        "TT of arrivals s",
         "CFI 0.5 %",
         "CFI 0.1 %",
         "CFI 0.01 %",
@@ -108,6 +112,7 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         cells += [_cell(r.get(f"cfi_{s:g}", math.nan), r.get(f"cfi_{s:g}_ci95", math.nan), 100) for s in CFI_SIGMAS]
         if ref is not None:
             cells = [f"{c} [{p:.1f}]" for c, p in zip(cells, ref, strict=True)]
+        cells.insert(2, _cell(r.get("tt_arrived", math.nan), r.get("tt_arrived_ci95", math.nan)))
         printed = [r.get(f"cfi_printed_{s:g}", math.nan) for s in CFI_SIGMAS]  # means; CIs in table.csv
         cells.append(" / ".join(f"{100 * v:.1f}" for v in printed) if np.all(np.isfinite(printed)) else "-")
         cells += [

@@ -108,14 +108,17 @@ def episode_files(run_dir: Path) -> list[Path]:
 
 
 def connectivity_figure(records: list[EpisodeRecord]) -> Figure:
-    """Cezayirli Fig. 4 style: number of links (robot pairs within the sensing radius) over time for each episode, with
-    the N - 1 links a connected team cannot go below, and the algebraic connectivity lambda2 below it."""
+    """Cezayirli Fig. 4 style: number of links (pairs that sense each other: within the sensing radius and, where the
+    run's sensing has occlusion, not hidden by a robot in between) over time for each episode, with the N - 1 links a
+    connected team cannot go below, and the algebraic connectivity lambda2 below it."""
     from stafpipe.metrics import connectivity
 
     fig = Figure(figsize=(7.0, 4.6))
     ax, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
     for rec in records:
-        links, lam2 = connectivity(rec.positions, float(rec.context["sensing_radius"]))
+        ctx = rec.context
+        hide = float(ctx["robot_radius"]) if ctx.get("occlusion") else 0.0
+        links, lam2 = connectivity(rec.positions, float(ctx["sensing_radius"]), hide)
         ax.plot(rec.time, links, lw=1.0, label=f"seed {rec.seed}")
         ax2.plot(rec.time, lam2, lw=1.0)
     n = records[0].positions.shape[1]
