@@ -132,3 +132,19 @@ def test_simulation_2_forms_a_v_behind_the_leader(workdir) -> None:
         assert (np.diff(arm[:, 0]) < 0).all()  # each robot further back than the one before it
         half_angle = math.degrees(math.atan2(abs(arm[-1, 1]), -arm[-1, 0]))
         assert 35.0 < half_angle < 65.0  # a 120 deg V has 60; trailing the moving leader narrows it
+
+
+@pytest.mark.slow
+def test_simulation_1_keeps_at_least_n_minus_1_sensed_links(workdir) -> None:
+    """Cezayirli Fig. 4 / Theorem 1: counted as sensed neighbours (occlusion on), the links never fall below N - 1
+    and the team's graph stays connected (lambda2 > 0) through the corridors."""
+    import pandas as pd
+
+    from conftest import job_dirs
+    from stafpipe.launch import launch
+
+    assert launch("eval", ["experiment=cezayirli_sim1", "eval.episodes=1", "eval.log_episodes=false"]) == 0
+    [run] = job_dirs(workdir / "outputs" / "eval")
+    row = pd.read_parquet(run / "results.parquet").iloc[0]
+    assert row["links_min"] >= 10 - 1 and row["lambda2_min"] > 0
+    assert row["links_min"] < row["links_mean"] - 5  # the line phases do thin the graph (occlusion is counted)
