@@ -208,3 +208,27 @@ def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) ->
     tc.imitation.near_weight = 1.0
     *_, plain = _teacher_samples(None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0))
     assert (plain == 1.0).all()
+
+
+@pytest.mark.slow
+def test_the_shipped_weights_are_the_best_on_held_out_maps(workdir) -> None:
+    """With train_ppo.validation, policy.pt holds the weights of the iteration with the best validation success
+    rate (ties: fewer collisions, then the earlier), chosen on maps it never trained on."""
+    import torch
+
+    from stafpipe.learning.ppo import best_iteration
+
+    words = [*TINY, "train_ppo.iterations=3", "train_ppo.eval_every=1", "train_ppo.validation=[doorway]",
+             "train_ppo.validation_episodes=3", "train_ppo.formations=[circle]"]  # fmt: skip
+    assert launch("train-ppo", words) == 0
+    [run] = job_dirs(workdir)
+    curves = pd.read_parquet(run / "learning_curves.parquet")
+    assert curves["val/success_rate"].notna().all() and curves["val/collisions_per_episode"].notna().all()
+    chosen = best_iteration(curves.to_dict("records"))
+    policy, made_by = load_policy(run / "policy.pt", "dgnn")
+    assert made_by["selected_iteration"] == chosen and made_by["validation_maps"] == ["doorway"]
+    state = torch.load(run / "ppo_state.pt", weights_only=True)
+    assert state["best"]["iteration"] == chosen
+    shipped = policy.state_dict()
+    assert all(torch.equal(shipped[k], v) for k, v in state["best"]["policy"].items())
+    assert launch("train-ppo", [*words[:-3], "train_ppo.validation=[corridor]"]) == 2  # corridor is trained on

@@ -114,6 +114,13 @@ class TrainPPOConfig:
     team_sizes: list[int] = field(default_factory=list)
     """Curriculum: ... and each of these team sizes (one size per iteration: a batch shares n); empty: the
     scenario's."""
+    validation: list[str] = field(default_factory=list)
+    """Held-out scenarios (names, files or directories, never trained on) for choosing the shipped weights: at each
+    `eval_every` iteration the mean action runs `validation_episodes` seeded episodes on them, and `policy.pt` holds
+    the weights of the iteration with the highest validation success rate (ties: fewer collisions, then the earlier).
+    Empty: `policy.pt` holds the last iteration's weights."""
+    validation_episodes: int = 16
+    """Episodes per validation point (spread over the validation scenarios, the same seeds every time)."""
     gamma: float = 0.99
     gae_lambda: float = 0.95
     clip: float = 0.2
@@ -166,6 +173,13 @@ class TrainPPOConfig:
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
+        require(self.validation_episodes >= 1, f"{key}.validation_episodes", "must be >= 1", self.validation_episodes)
+        require(
+            not self.validation or self.eval_every >= 1,
+            f"{key}.eval_every",
+            "must be >= 1 with validation",
+            self.eval_every,
+        )
         for kind in self.formations:
             require(kind in FORMATION_TYPES, f"{key}.formations", f"entries must be in {list(FORMATION_TYPES)}", kind)
         for n in self.team_sizes:

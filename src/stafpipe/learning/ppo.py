@@ -9,11 +9,13 @@ resume point: a resumed run ends with the same weights as an uninterrupted one.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -34,6 +36,7 @@ from stafpipe.world import WorldConfig, Worlds
 log = logging.getLogger(__name__)
 STATE_FILE = "ppo_state.pt"
 EVAL_SEED = 10_000_019  # evaluation episodes use seeds EVAL_SEED + world, never a training draw
+VALIDATION_SEED = 20_000_033  # held-out validation episodes: VALIDATION_SEED + world
 
 
 def update(
@@ -202,8 +205,10 @@ def train_ppo(
     config_hash: str,
     resume_from: Path | None,
     on_iteration: Callable[[list[dict[str, float]]], None],
+    validation: list[list[Drawn]] | None = None,
 ) -> tuple[PolicyNet, list[dict[str, float]]]:
-    """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state."""
+    """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state.
+    With `validation` (batches of held-out worlds), the returned network is the one of `best_iteration`."""
     torch.set_num_threads(tc.threads)
     torch.manual_seed(seed)
     adapter = ADAPTERS[tc.method](tc.policy, tc.reward, tc.plan, sensing.radius)
@@ -213,6 +218,7 @@ def train_ppo(
     history: list[dict[str, float]] = []
     start = 0
     warm: dict[str, float] = {}
+    best: dict[str, Any] = {}  # the weights of the best validation iteration so far
     opt = torch.optim.Adam(policy.parameters(), lr=tc.lr, eps=1e-5)
     gen = torch.Generator().manual_seed(seed)
     if resume_from is None and tc.imitation.epochs > 0:
@@ -226,6 +232,7 @@ def train_ppo(
         gen.set_state(state["minibatch_rng"])
         history, start = state["history"], int(state["iteration"])
         warm = state.get("warm", {})
+        best = state.get("best", {})
         log.info("resumed from iteration %d of %s", start, resume_from)
     bar = progress(range(start, tc.iterations), desc="train-ppo", unit="iteration", initial=start, total=tc.iterations)
     for it in bar:
@@ -258,14 +265,54 @@ def train_ppo(
             adapter.begin(teams_of(drawn, worlds))
             _, ev = collect(policy, adapter, worlds, obs, tc, tolerance, deterministic=True)
             row.update({f"eval/{k}": v for k, v in ev.items()})
+            if validation:
+                row.update(validate(policy, adapter, validation, world_cfg, sensing, tc, tolerance))
         if it == 0:
             row.update(warm)
         history.append(row)
+        if validation and best_iteration(history) == it + 1:
+            best = {"iteration": it + 1, "policy": copy.deepcopy(policy.state_dict())}
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")
         if (it + 1) % tc.checkpoint_every == 0 or it + 1 == tc.iterations:
-            _save(out_dir, config_hash, it + 1, policy, opt, gen, history, warm)
+            _save(out_dir, config_hash, it + 1, policy, opt, gen, history, warm, best)
         on_iteration(history)
+    if best:
+        policy.load_state_dict(best["policy"])
+        log.info("the shipped weights are iteration %d's (best on the validation maps)", best["iteration"])
     return policy, history
+
+
+def validate(
+    policy: PolicyNet,
+    adapter: Adapter,
+    batches: list[list[Drawn]],
+    world_cfg: WorldConfig,
+    sensing: SensingConfig,
+    tc: TrainPPOConfig,
+    tolerance: float,
+) -> dict[str, float]:
+    """The mean action on the held-out worlds (the same seeds every time): `val/success_rate` and
+    `val/collisions_per_episode`, averaged over every episode."""
+    episodes, sr, hits = 0, 0.0, 0.0
+    for batch in batches:
+        worlds = Worlds([d[0] for d in batch], sensing, world_cfg)
+        obs = worlds.reset([VALIDATION_SEED + w for w in range(len(batch))])
+        adapter.begin(teams_of(batch, worlds))
+        _, ev = collect(policy, adapter, worlds, obs, tc, tolerance, deterministic=True)
+        episodes += len(batch)
+        sr += ev["success_rate"] * len(batch)
+        hits += ev["collisions_per_episode"] * len(batch)
+    return {"val/success_rate": sr / episodes, "val/collisions_per_episode": hits / episodes}
+
+
+def best_iteration(history: list[dict[str, float]]) -> int | None:
+    """The iteration whose weights are shipped: the highest validation success rate, then the fewest collisions,
+    then the earliest; None without validation rows."""
+    rows = [r for r in history if "val/success_rate" in r]
+    if not rows:
+        return None
+    top = max(rows, key=lambda r: (r["val/success_rate"], -r["val/collisions_per_episode"], -r["iteration"]))
+    return int(top["iteration"])
 
 
 def initial_weights(tc: TrainPPOConfig) -> PolicyNet:
@@ -292,6 +339,7 @@ def _save(
     gen: torch.Generator,
     history: list[dict[str, float]],
     warm: dict[str, float],
+    best: dict[str, Any] | None = None,
 ) -> None:
     """The whole training state after `iteration` iterations (0: after the warm start), an exact resume point."""
     save_payload(
@@ -305,5 +353,6 @@ def _save(
             "minibatch_rng": gen.get_state(),
             "history": history,
             "warm": warm,
+            "best": best or {},
         },
     )

@@ -11,6 +11,7 @@ import copy
 import dataclasses
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -23,6 +24,9 @@ from stafpipe.paths import conf_dir
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
 from stafpipe.sections import section
+
+if TYPE_CHECKING:
+    from stafpipe.learning.ppo import Drawn
 
 log = logging.getLogger(__name__)
 
@@ -73,10 +77,32 @@ def scenario_files(entry: str) -> list[str]:
     return [entry]
 
 
+def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) -> list[list[Drawn]]:
+    """`tc.validation_episodes` held-out worlds, spread over the validation scenarios in turn, grouped into batches
+    that share a team size and robot; refused where a validation scenario is also a training one."""
+    from stafpipe.stages.eval import with_overrides
+
+    pool = [with_overrides(load_named_scenario(n), cfg) for entry in tc.validation for n in scenario_files(entry)]
+    if tc.formations:  # judged on the formations it is trained for
+        pool = [
+            build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
+            for s in pool
+            for kind in tc.formations
+        ]
+    shared = sorted({s.name for s in pool} & training)
+    if shared:
+        raise StafpipeError(f"train_ppo.validation: {shared} are also training scenarios; validation must be held out")
+    worlds = [pool[k % len(pool)] for k in range(tc.validation_episodes)] if pool else []
+    groups: dict[str, list[Drawn]] = {}
+    for s in worlds:
+        groups.setdefault(f"{s.spec.team.n}|{s.spec.robot}", []).append((s, *path_and_width(s)))
+    return [groups[k] for k in sorted(groups)]
+
+
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.launch import config_hash
     from stafpipe.learning.checkpoint import save_policy
-    from stafpipe.learning.ppo import STATE_FILE, train_ppo
+    from stafpipe.learning.ppo import STATE_FILE, best_iteration, train_ppo
     from stafpipe.plots.training import ppo_figure
     from stafpipe.sensing import SensingConfig
     from stafpipe.stages.eval import with_overrides
@@ -113,6 +139,8 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         groups.setdefault(f"{d[0].spec.team.n}|{d[0].spec.robot}", []).append(d)
     keys = sorted(groups)
 
+    validation = validation_batches(tc, cfg, {s.name for s in pool})
+
     def draw(rng: np.random.Generator, count: int) -> list[tuple[Scenario, np.ndarray, float]]:
         # one group per iteration; its scenarios drawn uniformly
         same = groups[keys[int(rng.integers(len(keys)))] if len(keys) > 1 else keys[0]]
@@ -144,6 +172,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
             digest,
             resume_from,
             on_iteration,
+            validation,
         )
     finally:
         board.close()
@@ -156,6 +185,8 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         "commit": commit(),
         "iterations": len(history),
         "final": history[-1] if history else {},
+        "validation_maps": sorted({d[0].name for batch in validation for d in batch}),
+        "selected_iteration": best_iteration(history) or len(history),
     }
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
     outputs += sorted((out_dir / TB_DIR).iterdir())
