@@ -232,3 +232,16 @@ def test_the_shipped_weights_are_the_best_on_held_out_maps(workdir) -> None:
     shipped = policy.state_dict()
     assert all(torch.equal(shipped[k], v) for k, v in state["best"]["policy"].items())
     assert launch("train-ppo", [*words[:-3], "train_ppo.validation=[corridor]"]) == 2  # corridor is trained on
+
+
+def test_curriculum_variants_that_do_not_fit_their_map_are_left_out() -> None:
+    from stafpipe.errors import StafpipeError
+    from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
+    from stafpipe.stages.train_ppo import curriculum
+
+    team = TeamSpec(n=4, formation="circle", spacing=1.0, start=[1.5, 1.5], goal=[6.5, 1.5], heading_deg=0.0)
+    narrow = build_scenario(ScenarioConfig(name="narrow", world=WorldBounds(0, 0, 8, 3), obstacles=[], team=team))
+    kept = curriculum([narrow], "formation", ["circle", "line"], "train_ppo.scenarios")  # a line of 4 is 3.4 m wide
+    assert [s.spec.team.formation for s in kept] == ["circle"]
+    with pytest.raises(StafpipeError, match="no scenario fits its team"):
+        curriculum([narrow], "formation", ["line"], "train_ppo.scenarios")

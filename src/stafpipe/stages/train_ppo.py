@@ -77,6 +77,29 @@ def scenario_files(entry: str) -> list[str]:
     return [entry]
 
 
+def curriculum(pool: list[Scenario], field: str, values: list, key: str) -> list[Scenario]:
+    """Every scenario of `pool` with each of `values` as its team's `field` (formation or n); a variant whose team
+    does not fit its map (a line of 11 wider than the map's goal area) is left out with a warning, not trained on."""
+    from stafpipe.scenario import ScenarioError
+
+    out, left_out = [], []
+    for s in pool:
+        for value in values:
+            try:
+                out.append(
+                    build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, **{field: value})))
+                )
+            except ScenarioError as exc:
+                left_out.append(f"{s.name} with {field} {value} ({exc})")
+    if left_out:
+        shown = "; ".join(left_out[:3]) + (" ..." if len(left_out) > 3 else "")
+        total = len(pool) * len(values)
+        log.warning("%s: %d of %d variants left out, their team does not fit: %s", key, len(left_out), total, shown)
+    if not out:
+        raise StafpipeError(f"{key}: no scenario fits its team with these {field}s {values}: {left_out[0]}")
+    return out
+
+
 def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) -> list[list[Drawn]]:
     """`tc.validation_episodes` held-out worlds, spread over the validation scenarios in turn, grouped into batches
     that share a team size and robot; refused where a validation scenario is also a training one."""
@@ -84,11 +107,7 @@ def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) 
 
     pool = [with_overrides(load_named_scenario(n), cfg) for entry in tc.validation for n in scenario_files(entry)]
     if tc.formations:  # judged on the formations it is trained for
-        pool = [
-            build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
-            for s in pool
-            for kind in tc.formations
-        ]
+        pool = curriculum(pool, "formation", tc.formations, "train_ppo.validation")
     shared = sorted({s.name for s in pool} & training)
     if shared:
         raise StafpipeError(f"train_ppo.validation: {shared} are also training scenarios; validation must be held out")
@@ -116,17 +135,9 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     sensing = section(cfg.sensing, SensingConfig)
     pool = [with_overrides(load_named_scenario(name), cfg) for entry in tc.scenarios for name in scenario_files(entry)]
     if tc.formations:  # every scenario with every formation of the curriculum
-        pool = [
-            build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, formation=kind)))
-            for s in pool
-            for kind in tc.formations
-        ]
+        pool = curriculum(pool, "formation", tc.formations, "train_ppo.scenarios")
     if tc.team_sizes:
-        pool = [
-            build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, n=n)))
-            for s in pool
-            for n in tc.team_sizes
-        ]
+        pool = curriculum(pool, "n", tc.team_sizes, "train_ppo.scenarios")
     test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
     if test_maps:
         log.warning(
