@@ -74,9 +74,13 @@ class Geometry:
         self._memo: dict[Any, Any] = {}
 
     def remember(self, key: Any, compute: Callable[[], Any]) -> Any:
-        """`compute()` once per `key` for this scenario content (e.g. a plan's clearance profile along its path)."""
+        """`compute()` once per `key` for this scenario content (e.g. a plan's clearance profile along its path); an
+        array comes back read-only, since every later caller shares it."""
         if key not in self._memo:
-            self._memo[key] = compute()
+            value = compute()
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            self._memo[key] = value
         return self._memo[key]
 
     @classmethod

@@ -153,11 +153,6 @@ def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
     return np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a.setflags(write=False)  # shared by every episode's plan: nobody may change it
-    return a
-
-
 def lateral_clearance(
     points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0, step: float = 0.05
 ) -> np.ndarray:
@@ -207,7 +202,7 @@ class StafPlan:
         from stafpipe.geometry import Geometry
 
         key = ("lateral_clearance", points.tobytes(), heading.tobytes())  # the same path every episode: once
-        self.clear = Geometry.of(scenario).remember(key, lambda: _frozen(lateral_clearance(points, heading, scenario)))
+        self.clear = Geometry.of(scenario).remember(key, lambda: lateral_clearance(points, heading, scenario))
         self.full_slots = np.asarray(template, float)
         _, full_width = _extent(self.full_slots, self.radius)
         narrow = 2 * (self.clear - cfg.margin) < full_width
