@@ -95,7 +95,7 @@ def curriculum(pool: list[Scenario], field: str, values: list, key: str) -> list
         shown = "; ".join(left_out[:3]) + (" ..." if len(left_out) > 3 else "")
         total = len(pool) * len(values)
         log.warning("%s: %d of %d variants left out, their team does not fit: %s", key, len(left_out), total, shown)
-    if not out:
+    if left_out and not out:
         raise StafpipeError(f"{key}: no scenario fits its team with these {field}s {values}: {left_out[0]}")
     return out
 
