@@ -191,8 +191,8 @@ def stage_task(cfg: DictConfig) -> None:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
     except BaseException as exc:
-        _remove_partials(out_dir)
-        if lock.held:
+        if lock.held:  # only this run's own unfinished files: another run's directory is never touched
+            _remove_partials(out_dir)
             with contextlib.suppress(OSError):
                 lock.release()
             _discard_if_empty(out_dir)
