@@ -48,7 +48,7 @@ class WorldConfig:
     """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
     faults: list[Fault] = field(default_factory=list)
     """Faults the world and its sensing inject (stafpipe.faults: stuck, silent, drop, dropout), the same for every
-    method; e.g. `world.faults=[{kind: stuck, robot: 3, start: 8}]` or `experiment=fault_stuck`."""
+    method; e.g. `world.faults=[{kind: stuck, robot: 3, start: 8}]` (docs/faults.md, `stafpipe run faults`)."""
 
     def check(self, key: str = "world") -> None:
         from stafpipe.errors import require
