@@ -159,10 +159,10 @@ def run_episode(
                 log.event(times[-1], step, e.kind, e.robots, e.detail)
 
     def log_faults(step: int) -> None:
+        if log is None:
+            return
         for kind, fault in worlds.fault_events:
-            robots = [fault.robot] if fault.kind in ROBOT_FAULTS else []
-            if log:
-                log.event(times[-1], step, kind, robots, fault.describe())
+            log.event(times[-1], step, kind, [fault.robot] if fault.kind in ROBOT_FAULTS else [], fault.describe())
 
     record(0)
     log_faults(0)

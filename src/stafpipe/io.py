@@ -6,11 +6,14 @@ import json
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def atomic_write(path: Path, write: Callable[[Path], object]) -> Path:
@@ -45,7 +48,7 @@ def write_table(df: pd.DataFrame, stem: Path, metadata: dict[str, str] | None = 
     return [parquet, csv]
 
 
-def markdown_table(df, digits: int = 3) -> str:
+def markdown_table(df: pd.DataFrame, digits: int = 3) -> str:
     """A DataFrame as a GitHub Markdown table, floats rounded to `digits`."""
 
     def cell(v: object) -> str:
@@ -56,7 +59,7 @@ def markdown_table(df, digits: int = 3) -> str:
     return "\n".join(lines) + "\n"
 
 
-def save_figure(fig, stem: Path, formats: Sequence[str] = ("png", "pdf"), dpi: int = 130) -> list[Path]:
+def save_figure(fig: Figure, stem: Path, formats: Sequence[str] = ("png", "pdf"), dpi: int = 130) -> list[Path]:
     """A matplotlib Figure as `stem.<format>` for each format, each written atomically."""
     return [
         atomic_write(stem.with_name(f"{stem.name}.{fmt}"), lambda tmp, f=fmt: fig.savefig(tmp, format=f, dpi=dpi))  # type: ignore[misc]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -39,6 +40,12 @@ class Trajectory:
     """(T+1, n) distance from each robot's surface to the nearest obstacle."""
     collisions: list[tuple[int, int, int]] = field(default_factory=list)
     """(step, robot a, robot b or -1 for an obstacle) for every contact that began."""
+
+    @cached_property
+    def goal_distance(self) -> np.ndarray:
+        """(T+1, n) each robot's distance to its goal slot, robots matched to slots at every sample (computed once:
+        TT, TT of arrivals and the subteams' metrics all read it)."""
+        return np.stack([matched_goal_distance(p, self.team_goal) for p in self.positions])
 
 
 @dataclass
@@ -84,17 +91,15 @@ def success_rate(traj: Trajectory, ctx: MetricContext) -> float:
 
 def travel_time(traj: Trajectory, ctx: MetricContext) -> float:
     """TT: first time at which every robot is within tolerance of a goal slot; NaN if that never happens."""
-    for k in range(len(traj.time)):
-        if matched_goal_distance(traj.positions[k], traj.team_goal).max() <= ctx.goal_tolerance:
-            return float(traj.time[k])
-    return math.nan
+    done = np.flatnonzero((traj.goal_distance <= ctx.goal_tolerance).all(axis=1))
+    return float(traj.time[done[0]]) if len(done) else math.nan
 
 
 def travel_time_of_arrivals(traj: Trajectory, ctx: MetricContext) -> float:
     """TT over the robots that arrive: the first time at which every robot that ends the episode at a goal slot is
     within tolerance of one (equals TT when the whole team arrives; NaN when nobody does). STAF's Table 1 prints a TT
     for L&F although its SR is 40-70 %: this is our reading of it (docs/metrics.md)."""
-    distance = np.stack([matched_goal_distance(p, traj.team_goal) for p in traj.positions])  # (T+1, n)
+    distance = traj.goal_distance
     arrived = distance[-1] <= ctx.goal_tolerance
     if not arrived.any():
         return math.nan
@@ -147,7 +152,7 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext, memo: dict | None = No
     hit = np.zeros(traj.positions.shape[1], dtype=bool)
     for _, a, b in traj.collisions:
         hit[[a, b] if b >= 0 else [a]] = True
-    matched = np.stack([matched_goal_distance(p, traj.team_goal) for p in traj.positions])  # (T+1, n)
+    matched = traj.goal_distance
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
     out: dict[str, float] = {}
     for j, team in enumerate(np.unique(labels)):

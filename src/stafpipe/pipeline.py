@@ -62,7 +62,7 @@ def load_pipeline(path: Path) -> Pipeline:
     """Read and validate a pipeline file; errors name the file and the bad field."""
     try:
         raw = OmegaConf.to_container(OmegaConf.load(path))
-    except Exception as exc:
+    except Exception as exc:  # any parse error becomes one clear message
         raise StafpipeError(f"{path}: not valid YAML ({exc})") from exc
     if not isinstance(raw, dict) or not isinstance(raw.get("steps"), list) or not raw["steps"]:
         raise StafpipeError(f"{path}: needs a non-empty list 'steps'")

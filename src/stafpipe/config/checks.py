@@ -62,7 +62,7 @@ def _unknown_keys(node: DictConfig, path: str) -> None:
                 hint = f" (did you mean {path + '.' if path else ''}{close[0]}?)" if close else ""
                 raise ConfigError(f"{name} is not a setting of `{path or 'the config'}`{hint}")
     for key in map(str, node):
-        child = node._get_node(key)
+        child = node._get_node(key)  # the node itself, so that its type is kept
         if isinstance(child, DictConfig):
             _unknown_keys(child, f"{path}.{key}" if path else str(key))
         elif isinstance(child, ListConfig):
@@ -71,7 +71,7 @@ def _unknown_keys(node: DictConfig, path: str) -> None:
                     _unknown_keys(item, f"{path}.{key}[{i}]" if path else f"{key}[{i}]")
 
 
-def _non_finite(node: Any, path: str) -> None:
+def _non_finite(node: Any, path: str) -> None:  # node: a plain container (dicts, lists, values)
     if isinstance(node, dict):
         for key, value in node.items():
             _non_finite(value, f"{path}.{key}" if path else str(key))

@@ -49,7 +49,7 @@ class LearnedController(Controller):
     `cfg.deterministic` is false. `cfg.low_level` other than `learned` (where the config has it) replaces the
     network's action by a hand-made low level (learning/teachers.py): the method with its learned part removed."""
 
-    def __init__(self, cfg) -> None:
+    def __init__(self, cfg: Any) -> None:  # a method config dataclass (DGNNConfig, StafMethodConfig)
         super().__init__()
         check = getattr(cfg, "check", None)
         if check:

@@ -9,13 +9,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
 from stafpipe.highlevel.config import NODE_FEATURES
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @dataclass
@@ -114,7 +117,7 @@ def make_batch(teams: Sequence[Team], features: Sequence[str], radius: float) ->
     return collate([team_graph(t, features, radius) for t in teams], [t.m for t in teams])
 
 
-def teams_from_frame(df, m: int | Sequence[int], rng: np.random.Generator | None = None) -> list[Team]:
+def teams_from_frame(df: pd.DataFrame, m: int | Sequence[int], rng: np.random.Generator | None = None) -> list[Team]:
     """Teams of a `stafpipe generate` table (docs/data.md); `m` fixed, or drawn per team from a list with `rng`."""
     teams = []
     for _, g in df.sort_values(["instance", "robot"]).groupby("instance", sort=True):

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle, Polygon
@@ -19,7 +20,7 @@ OBSTACLE_GREY = "0.6"
 SUBTEAM_COLOURS = [f"C{k}" for k in range(10)]
 
 
-def draw_map(ax, scenario: Scenario) -> None:
+def draw_map(ax: Axes, scenario: Scenario) -> None:
     """Static obstacles in grey: solid polygons, discs and thick segments; world walls as a thin frame."""
     for poly in scenario.polygons:
         ax.add_patch(Polygon(poly, closed=True, color=OBSTACLE_GREY, lw=0))

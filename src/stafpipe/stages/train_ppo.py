@@ -100,21 +100,33 @@ def curriculum(pool: list[Scenario], field: str, values: list, key: str) -> list
     return out
 
 
-def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) -> list[list[Drawn]]:
-    """`tc.validation_episodes` held-out worlds, spread over the validation scenarios in turn, grouped into batches
-    that share a team size and robot; refused where a validation scenario is also a training one."""
+def scenario_pool(entries: list[str], cfg: DictConfig, formations: list[str], key: str) -> list[Scenario]:
+    """The scenarios of `entries` (names, files, directories) with the run's overrides, each with every curriculum
+    formation (none: its own)."""
     from stafpipe.stages.eval import with_overrides
 
-    pool = [with_overrides(load_named_scenario(n), cfg) for entry in tc.validation for n in scenario_files(entry)]
-    if tc.formations:  # judged on the formations it is trained for
-        pool = curriculum(pool, "formation", tc.formations, "train_ppo.validation")
+    pool = [with_overrides(load_named_scenario(name), cfg) for entry in entries for name in scenario_files(entry)]
+    return curriculum(pool, "formation", formations, key) if formations and pool else pool
+
+
+def by_team(drawn: list[Drawn]) -> dict[str, list[Drawn]]:
+    """Worlds grouped by team size and robot: the worlds of one batch must share both."""
+    groups: dict[str, list[Drawn]] = {}
+    for d in drawn:
+        groups.setdefault(f"{d[0].spec.team.n}|{d[0].spec.robot}", []).append(d)
+    return groups
+
+
+def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) -> list[list[Drawn]]:
+    """`tc.validation_episodes` held-out worlds, spread over the validation scenarios in turn (judged on the
+    formations it is trained for), grouped into batches that share a team size and robot; refused where a validation
+    scenario is also a training one."""
+    pool = scenario_pool(tc.validation, cfg, tc.formations, "train_ppo.validation")
     shared = sorted({s.name for s in pool} & training)
     if shared:
         raise StafpipeError(f"train_ppo.validation: {shared} are also training scenarios; validation must be held out")
     worlds = [pool[k % len(pool)] for k in range(tc.validation_episodes)] if pool else []
-    groups: dict[str, list[Drawn]] = {}
-    for s in worlds:
-        groups.setdefault(f"{s.spec.team.n}|{s.spec.robot}", []).append((s, *path_and_width(s)))
+    groups = by_team([(s, *path_and_width(s)) for s in worlds])
     return [groups[k] for k in sorted(groups)]
 
 
@@ -124,7 +136,6 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.learning.ppo import STATE_FILE, best_iteration, train_ppo
     from stafpipe.plots.training import ppo_figure
     from stafpipe.sensing import SensingConfig
-    from stafpipe.stages.eval import with_overrides
     from stafpipe.tensorboard_log import TB_DIR, ScalarLog
     from stafpipe.training_record import commit
     from stafpipe.world import WorldConfig
@@ -133,9 +144,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     tc.check()
     world_cfg = section(cfg.world, WorldConfig)
     sensing = section(cfg.sensing, SensingConfig)
-    pool = [with_overrides(load_named_scenario(name), cfg) for entry in tc.scenarios for name in scenario_files(entry)]
-    if tc.formations:  # every scenario with every formation of the curriculum
-        pool = curriculum(pool, "formation", tc.formations, "train_ppo.scenarios")
+    pool = scenario_pool(tc.scenarios, cfg, tc.formations, "train_ppo.scenarios")
     if tc.team_sizes:
         pool = curriculum(pool, "n", tc.team_sizes, "train_ppo.scenarios")
     test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
@@ -144,10 +153,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
             "train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps
         )
     drawn = [(s, *path_and_width(s)) for s in progress(pool, desc="train-ppo: maps", unit="map")]
-    # a batch of worlds shares the team size and the robot: one such group per iteration
-    groups: dict[str, list] = {}
-    for d in drawn:
-        groups.setdefault(f"{d[0].spec.team.n}|{d[0].spec.robot}", []).append(d)
+    groups = by_team(drawn)  # one group per iteration
     keys = sorted(groups)
 
     validation = validation_batches(tc, cfg, {s.name for s in pool})
