@@ -2,7 +2,12 @@
 
 A step's run directory is `<out_root>/pipelines/<pipeline>/<NN>-<step>-<hash>`, where the hash is that of the step's
 resolved config. A step whose directory already holds a completion marker with the same hash is skipped (unless
-forced). An override may name an earlier step's directory as `{steps.<name>.dir}`.
+forced). An override may name an earlier step's directory as `{steps.<name>.dir}`, and every earlier step's directory
+as `{steps.*.dir}` (a comma-separated list, for a report over all of them).
+
+A step may be `{include: <pipeline>}`: that pipeline's steps join this one, named `<pipeline>.<step>`, and keep their
+own run directories (`<out_root>/pipelines/<pipeline>/...`), so a study run on its own is not run again by a pipeline
+that includes it.
 """
 
 from __future__ import annotations
@@ -23,7 +28,8 @@ from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, i
 from stafpipe.paths import conf_dir, pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
-_STEP_REF = re.compile(r"\{steps\.([A-Za-z0-9_-]+)\.dir\}")
+_STEP_REF = re.compile(r"\{steps\.([A-Za-z0-9_.-]+)\.dir\}")
+_ALL_REF = "{steps.*.dir}"
 
 
 @dataclass
@@ -33,6 +39,10 @@ class PipelineStep:
     name: str
     stage: str
     overrides: list[str]
+    home: str = ""
+    """The pipeline whose run-directory tree holds this step (set for included steps; empty: the running pipeline)."""
+    index: int = -1
+    """The step's position in its home pipeline (numbers its run directory)."""
 
 
 @dataclass
@@ -58,8 +68,8 @@ def find_pipeline(name_or_path: str) -> Path:
     raise StafpipeError(f"no pipeline '{name_or_path}' (a file, or one of: {', '.join(shipped)})")
 
 
-def load_pipeline(path: Path) -> Pipeline:
-    """Read and validate a pipeline file; errors name the file and the bad field."""
+def load_pipeline(path: Path, _including: tuple[str, ...] = ()) -> Pipeline:
+    """Read and validate a pipeline file, with its includes expanded; errors name the file and the bad field."""
     try:
         raw = OmegaConf.to_container(OmegaConf.load(path))
     except Exception as exc:  # any parse error becomes one clear message
@@ -69,21 +79,52 @@ def load_pipeline(path: Path) -> Pipeline:
     unknown = set(raw) - {"name", "description", "steps"}
     if unknown:
         raise StafpipeError(f"{path}: unknown field(s) {sorted(unknown)}")
+    name_of_pipe = str(raw.get("name", path.stem))
     steps: list[PipelineStep] = []
     for i, item in enumerate(raw["steps"]):
         where = f"{path}: steps[{i}]"
+        if isinstance(item, dict) and set(item) == {"include"}:
+            steps += _included(str(item["include"]), where, (*_including, name_of_pipe))
+            continue
         if not isinstance(item, dict) or set(item) - {"name", "stage", "overrides"}:
-            raise StafpipeError(f"{where}: a step has 'stage', optional 'name' and 'overrides', got {item!r}")
+            raise StafpipeError(
+                f"{where}: a step has 'stage', optional 'name' and 'overrides' (or is {{include: PIPELINE}}), "
+                f"got {item!r}"
+            )
         if item.get("stage") not in STAGES:
             raise StafpipeError(f"{where}.stage: must be one of {list(STAGES)}, got {item.get('stage')!r}")
         overrides = item.get("overrides", [])
         if not isinstance(overrides, list) or not all(isinstance(o, str | int | float) for o in overrides):
             raise StafpipeError(f"{where}.overrides: must be a list of strings")
         name = str(item.get("name", item["stage"]))
-        if any(s.name == name for s in steps):
-            raise StafpipeError(f"{where}.name: '{name}' is used twice; give the steps distinct names")
+        if not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+            raise StafpipeError(f"{where}.name: '{name}' may hold only letters, digits, '_' and '-'")
         steps.append(PipelineStep(name, item["stage"], [str(o) for o in overrides]))
-    return Pipeline(str(raw.get("name", path.stem)), str(raw.get("description", "")), steps)
+    for i, step in enumerate(steps):
+        if any(s.name == step.name for s in steps[:i]):
+            raise StafpipeError(f"{path}: step name '{step.name}' is used twice; give the steps distinct names")
+    return Pipeline(name_of_pipe, str(raw.get("description", "")), steps)
+
+
+def _included(name: str, where: str, including: tuple[str, ...]) -> list[PipelineStep]:
+    """The steps of pipeline `name`, renamed `<name>.<step>` (their references too), each keeping its own pipeline's
+    run-directory tree and number."""
+    if name in including:
+        raise StafpipeError(f"{where}.include: '{name}' includes itself ({' -> '.join([*including, name])})")
+    inner = load_pipeline(find_pipeline(name), including)
+    prefix = inner.name + "."
+
+    def rename(match: re.Match[str]) -> str:
+        return "{steps." + prefix + match.group(1) + ".dir}"
+
+    out = []
+    for i, step in enumerate(inner.steps):
+        if step.home:  # included two levels down: already named and housed
+            out.append(PipelineStep(prefix + step.name, step.stage, step.overrides, step.home, step.index))
+            continue
+        overrides = [_STEP_REF.sub(rename, o) for o in step.overrides]
+        out.append(PipelineStep(prefix + step.name, step.stage, overrides, inner.name, i))
+    return out
 
 
 def compose_config(stage: str, overrides: list[str]) -> DictConfig:
@@ -135,7 +176,8 @@ def run_pipeline(
                 raise StafpipeError(f"step '{_step.name}' refers to '{match.group(1)}', which is not an earlier step")
             return str(dirs[match.group(1)])
 
-        overrides = [*extra, *(_STEP_REF.sub(ref, o) for o in step.overrides)]
+        every = ",".join(str(d) for d in dirs.values())
+        overrides = [*extra, *(_STEP_REF.sub(ref, o.replace(_ALL_REF, every)) for o in step.overrides)]
         try:
             cfg = compose_config(step.stage, overrides)
         except Exception as exc:  # noqa: BLE001 - Hydra's composition errors, said in the user's terms
@@ -145,7 +187,10 @@ def run_pipeline(
                 f"pipeline {pipe.name}: step '{step.name}' has a bad config: {explain(exc, step.stage, overrides)}"
             ) from None
         digest = config_hash(cfg)
-        run_dir = (out_root / "pipelines" / pipe.name / f"{i:02d}-{step.name}-{digest[:10]}").resolve()
+        home, number, short = (
+            (step.home, step.index, step.name.rsplit(".", 1)[-1]) if step.home else (pipe.name, i, step.name)
+        )
+        run_dir = (out_root / "pipelines" / home / f"{number:02d}-{short}-{digest[:10]}").resolve()
         dirs[step.name] = run_dir
         plan.append((step, overrides, run_dir, digest, cfg))
 

@@ -120,7 +120,7 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity", "regions", "timing", "table")
+PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity", "regions", "timing", "table", "report")
 FORMATS = ("png", "pdf", "svg")
 
 
@@ -134,11 +134,13 @@ class PlotConfig:
     run: its learning curves), `connectivity` (an eval run: links and lambda2 over time, Cezayirli Fig. 4), `regions`
     (an eval run of method=zhu: snapshots of common regions, target formations and robots, Zhu Fig. 4) or `timing`
     (an eval run of method=zhu: the computation-time table, Zhu Table I, as timing.md and timing.tex) or `table` (eval
-    runs, `run_dir` and/or `run_dirs`: STAF Table 1 and Table 2, ours beside the paper's, as table.md/.csv)."""
+    runs, `run_dir` and/or `run_dirs`: STAF Table 1 and Table 2, ours beside the paper's, as table.md/.csv) or `report`
+    (any finished eval, ablate and plot runs, `run_dirs`: every claim of the three papers with its computed verdict, as
+    REPRODUCTION.md and reproduction.csv; `stafpipe run reproduce`)."""
     run_dir: str = ""
     """The run directory to draw from."""
     run_dirs: list[str] = field(default_factory=list)
-    """`table`: more eval run directories whose episodes join the table."""
+    """`table`: more eval run directories whose episodes join the table; `report`: the runs it reads."""
     max_episodes: int = 4
     """Draw at most this many episodes, in episode order (0: all)."""
     times: list[float] = field(default_factory=list)

@@ -41,7 +41,7 @@ METRICS = (
 GROUP = ["run", "method", "label", "formation", "n", "drive", "scenario", "paper_cell"]
 
 
-def _mean_ci(values: pd.Series) -> tuple[float, float]:
+def mean_ci(values: pd.Series) -> tuple[float, float]:
     v = values.dropna().to_numpy(float)
     if len(v) == 0:
         return math.nan, math.nan
@@ -65,7 +65,7 @@ def summary_table(results: pd.DataFrame, prefix: str = "") -> pd.DataFrame:
                 continue
             column = f"{prefix}{metric}" if metric in ("sr", "tt") or metric.startswith("cfi") else metric
             if column in group:
-                row[metric], row[f"{metric}_ci95"] = _mean_ci(group[column])
+                row[metric], row[f"{metric}_ci95"] = mean_ci(group[column])
         rows.append(row)
     return pd.DataFrame(rows)
 

@@ -13,7 +13,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config.schema import PlotConfig
 from stafpipe.errors import StafpipeError
-from stafpipe.io import atomic_write, save_figure
+from stafpipe.io import atomic_write, save_figure, write_table
 from stafpipe.sections import section
 
 log = logging.getLogger(__name__)
@@ -169,6 +169,21 @@ def _training_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     raise StafpipeError(f"plot.run_dir: {run_dir} holds no learning_curves.parquet or losses.parquet (a training run?)")
 
 
+def _report(pc: PlotConfig, out_dir: Path) -> list[Path]:
+    """REPRODUCTION.md and reproduction.csv over every run directory given (eval, ablate and plot runs; others are
+    skipped); every run is read before anything is written."""
+    from stafpipe.report.evidence import gather
+    from stafpipe.report.render import judge_all, markdown, rows_frame
+
+    evidence = gather([Path(d) for d in [pc.run_dir, *pc.run_dirs] if d])
+    rows = judge_all(evidence)
+    text = markdown(rows, evidence.figures, out_dir)
+    outputs = write_table(rows_frame(rows), out_dir / "reproduction")
+    outputs.append(atomic_write(out_dir / "REPRODUCTION.md", lambda tmp: tmp.write_text(text)))
+    print("\n".join(str(p) for p in outputs))
+    return outputs
+
+
 def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
     pc = section(cfg.plot, PlotConfig)
@@ -178,6 +193,8 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
         if not d.is_dir():
             raise StafpipeError(f"plot.run_dir: no such directory: {d}")
     outputs: list[Path] = []
+    if pc.kind == "report":
+        return _report(pc, out_dir)
     if pc.kind in ("timing", "table"):
         tables = _timing_tables(run_dir) if pc.kind == "timing" else _staf_tables(pc)  # all read before any write
         for name, text in tables.items():

@@ -1,0 +1,55 @@
+"""A claim of a paper, the measurement that answers it, and the row it becomes in the report."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from stafpipe.report.evidence import Evidence
+from stafpipe.report.verdicts import MISSING, Criterion, Number
+
+
+@dataclass(frozen=True)
+class Measured:
+    """What a claim's measurement returns: our number, the criterion it is judged by, and a note (how it was read)."""
+
+    ours: Number
+    criterion: Criterion
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class Claim:
+    paper: str
+    artifact: str
+    statement: str
+    printed: str
+    """The paper's number or words."""
+    pipeline: str
+    """The pipeline whose runs measure it."""
+    measure: Callable[[Evidence], Measured]
+
+
+@dataclass(frozen=True)
+class Row:
+    claim: Claim
+    measured: Measured
+    verdict: str
+
+
+def judge(claim: Claim, evidence: Evidence) -> Row:
+    """The claim's row: its measurement and the verdict its criterion computes (not measured without its runs)."""
+    measured = claim.measure(evidence)
+    verdict = MISSING if math.isnan(measured.ours.value) else measured.criterion.verdict(measured.ours)
+    return Row(claim, measured, verdict)
+
+
+def difference(a: Number, b: Number) -> Number:
+    """a - b with the CIs combined as independent (root of the sum of squares)."""
+    return Number(a.value - b.value, math.hypot(a.half, b.half), min(a.n, b.n) if a.n and b.n else 0, a.unit)
+
+
+def fraction(hits: int, total: int) -> Number:
+    """hits out of total, in per cent (NaN when nothing was measured)."""
+    return Number(100.0 * hits / total if total else math.nan, 0.0, total, " %")

@@ -1,0 +1,486 @@
+"""STAF's tables, figures and claims (STAF Sec. 4-5, App. F) as report rows. Paper numbers: Table 1 from
+`plots.staf_tables.PAPER_TABLE1`; the others quoted from the paper's text, cited in each row."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import pandas as pd
+
+from stafpipe.metrics import CFI_SIGMAS
+from stafpipe.plots.staf_tables import PAPER_TABLE1, mean_ci
+from stafpipe.report.claims import Claim, Measured, fraction
+from stafpipe.report.evidence import Evidence
+from stafpipe.report.verdicts import Criterion, Number
+
+FORMATIONS = ("circle", "wedge", "line")
+NAMES = {"staf": "STAF", "dgnn": "DGNN", "lf": "L&F"}
+
+
+def cell(method: str, formation: str) -> dict[str, Any]:
+    """Table 1's cell: the corridor, ten holonomic robots (STAF Sec. 4)."""
+    return {"method": method, "scenario": "corridor", "formation": formation, "n": 10, "drive": "holonomic"}
+
+
+def _cfi_note(ev: Evidence, method: str, formation: str) -> str:
+    printed = ev.number("cfi_printed_0.5", 100, " %", **cell(method, formation))
+    return f"with the printed gap term: {printed.text()}" if not math.isnan(printed.value) else ""
+
+
+def _at_least(
+    column: str, where: dict[str, Any], target: float, slack: float, note: str = ""
+) -> Callable[[Evidence], Measured]:
+    """A measurement: the mean of `column` (in per cent) over the matching episodes, at least `target`."""
+    return lambda ev: Measured(ev.number(column, 100, " %", **where), Criterion("at_least", target, slack), note)
+
+
+def _table1_claims() -> list[Claim]:
+    claims = []
+    for f in FORMATIONS:
+        for method in ("staf", "dgnn"):
+            sr = PAPER_TABLE1[(method, f)][0]
+            claims.append(
+                Claim(
+                    "STAF",
+                    "Table 1",
+                    f"{NAMES[method]} success rate, {f}",
+                    f"{sr:.0f} %",
+                    "staf_table1",
+                    _at_least("sr", cell(method, f), sr - 5, 10),
+                )
+            )
+        lf_sr = PAPER_TABLE1[("lf", f)][0]
+        claims.append(
+            Claim("STAF", "Table 1", f"L&F success rate, {f}", f"{lf_sr:.0f} %", "staf_table1", _near_sr(f, lf_sr))
+        )
+        cfi = PAPER_TABLE1[("staf", f)][2]
+        claims.append(
+            Claim("STAF", "Table 1", f"STAF CFI (sigma 0.5), {f}", f"{cfi:.2f} %", "staf_table1", _staf_cfi(f, cfi))
+        )
+        lf_cfi, dgnn_cfi = PAPER_TABLE1[("lf", f)][2], PAPER_TABLE1[("dgnn", f)][2]
+        claims.append(
+            Claim(
+                "STAF",
+                "Table 1",
+                f"L&F keeps formation better than DGNN (CFI 0.5), {f}",
+                f"L&F {lf_cfi:.1f} % > DGNN {dgnn_cfi:.1f} %",
+                "staf_table1",
+                _compare("cfi_0.5", cell("lf", f), cell("dgnn", f), "DGNN"),
+            )
+        )
+    claims += [
+        Claim(
+            "STAF",
+            "Table 1",
+            "STAF's CFI is above DGNN's and L&F's at every sigma and formation",
+            "9 of 9 cells",
+            "staf_table1",
+            _staf_cfi_above_both,
+        ),
+        Claim(
+            "STAF",
+            "Table 1",
+            "L&F is the fastest method (its TT below STAF's and DGNN's)",
+            "3 of 3 formations (27.4 / 26.5 / 30.1 s)",
+            "staf_table1",
+            _lf_fastest,
+        ),
+        Claim(
+            "STAF",
+            "Table 1",
+            "L&F gets stuck: its whole team does not pass the corridor (SR below 100 % in every formation)",
+            "40 / 70 / 60 %",
+            "staf_table1",
+            _lf_stuck,
+        ),
+    ]
+    return claims
+
+
+def _near_sr(formation: str, paper: float) -> Callable[[Evidence], Measured]:
+    return lambda ev: Measured(ev.number("sr", 100, " %", **cell("lf", formation)), Criterion("near", paper, 15))
+
+
+def _staf_cfi(formation: str, paper: float) -> Callable[[Evidence], Measured]:
+    return lambda ev: Measured(
+        ev.number("cfi_0.5", 100, " %", **cell("staf", formation)),
+        Criterion("at_least", paper - 5, 10),
+        _cfi_note(ev, "staf", formation),
+    )
+
+
+def _compare(column: str, ours: dict[str, Any], other: dict[str, Any], name: str) -> Callable[[Evidence], Measured]:
+    return lambda ev: _above(ev, column, ours, other, name)
+
+
+def _lf_stuck(ev: Evidence) -> Measured:
+    srs = [ev.number("sr", 100, " %", **cell("lf", f)).value for f in FORMATIONS]
+    worst = max((s for s in srs if not math.isnan(s)), default=math.nan)
+    return Measured(Number(worst, 0, 0, " %"), Criterion("at_most", 90, 9.9), "the largest of L&F's three SRs")
+
+
+def _above(ev: Evidence, column: str, ours: dict[str, Any], other: dict[str, Any], name: str) -> Measured:
+    a, b = ev.number(column, 100, " %", **ours), ev.number(column, 100, " %", **other)
+    return Measured(a, Criterion("above", b.value, target_ci=b.half), f"{name}: {b.text()}")
+
+
+def _staf_cfi_above_both(ev: Evidence) -> Measured:
+    hits, total = 0, 0
+    for f in FORMATIONS:
+        for s in CFI_SIGMAS:
+            col = f"cfi_{s:g}"
+            staf = ev.number(col, **cell("staf", f))
+            others = [ev.number(col, **cell(m, f)) for m in ("dgnn", "lf")]
+            if any(math.isnan(x.value) for x in (staf, *others)):
+                continue
+            total += 1
+            hits += all(staf.value - staf.half > o.value + o.half for o in others)
+    return Measured(
+        Number(hits if total else math.nan, 0, total), Criterion("at_least", 9, 3), "cells above both outside the CIs"
+    )
+
+
+def _lf_fastest(ev: Evidence) -> Measured:
+    hits, total = 0, 0
+    for f in FORMATIONS:
+        lf = ev.number("tt_arrived", **cell("lf", f))
+        rivals = [ev.number("tt", **cell(m, f)) for m in ("staf", "dgnn")]
+        if math.isnan(lf.value) or all(math.isnan(r.value) for r in rivals):
+            continue
+        total += 1
+        hits += all(math.isnan(r.value) or lf.value < r.value for r in rivals)
+    return Measured(
+        Number(hits if total else math.nan, 0, total),
+        Criterion("at_least", 3, 1),
+        "formations where L&F's TT of arrivals is below both others' TT (L&F's whole team never arrives)",
+    )
+
+
+def _table2_and_fig4() -> list[Claim]:
+    claims = []
+    for f in FORMATIONS:
+
+        def both(ev: Evidence, f: str = f) -> Measured:
+            rows = ev.select(**cell("staf", f))
+            if rows.empty or "sub2_sr" not in rows:
+                return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+            subs = [mean_ci(rows[c]) for c in ("sub1_sr", "sub2_sr")]
+            worst = min(subs, key=lambda mc: mc[0])
+            return Measured(
+                Number(100 * worst[0], 100 * worst[1], len(rows), " %"),
+                Criterion("at_least", 95, 10),
+                f"subteams {100 * subs[0][0]:.1f} / {100 * subs[1][0]:.1f} %",
+            )
+
+        claims.append(Claim("STAF", "Table 2", f"both subteams succeed, {f}", "100 % each", "staf_table1", both))
+
+    def two_subteams(ev: Evidence) -> Measured:
+        rows = pd.concat([ev.select(**cell("staf", f)) for f in FORMATIONS])
+        hits = int((rows["subteams_max"] == 2).sum()) if not rows.empty else 0
+        return Measured(fraction(hits, len(rows)), Criterion("at_least", 100, 10), "episodes with exactly two subteams")
+
+    claims.append(
+        Claim("STAF", "Fig. 4", "the team divides into two subteams (red, blue)", "2", "staf_table1", two_subteams)
+    )
+    return claims
+
+
+def _loss_terms(ev: Evidence, variant: str, column: str) -> tuple[Number, Number]:
+    df = ev.study("loss_terms")
+    if df.empty:
+        return Number(math.nan), Number(math.nan)
+    raw = df[df["labels"] == "raw"]
+
+    def num(v: str) -> Number:
+        x = raw[raw["variant"] == v][column]
+        mean, ci = mean_ci(x) if len(x) else (math.nan, math.nan)
+        return Number(mean, ci, len(x))
+
+    return num(variant), num("full")
+
+
+def _fig7_claims() -> list[Claim]:
+    def vs_full(variant: str, column: str, kind: str) -> Callable[[Evidence], Measured]:
+        def measure(ev: Evidence) -> Measured:
+            ours, full = _loss_terms(ev, variant, column)
+            return Measured(ours, Criterion(kind, full.value, target_ci=full.half), f"full loss: {full.text(3)}")
+
+        return measure
+
+    def absolute(variant: str, column: str, criterion: Criterion) -> Callable[[Evidence], Measured]:
+        return lambda ev: Measured(_loss_terms(ev, variant, column)[0], criterion)
+
+    rows = [
+        (
+            "Fig. 7(a)",
+            "balance alone splits 12 robots evenly into 3 (imbalance, robots)",
+            "even",
+            absolute("a_balance_only", "imbalance", Criterion("at_most", 1, 1)),
+        ),
+        (
+            "Fig. 7(b)",
+            "adjacency alone puts every robot in one subteam (subteams used)",
+            "1",
+            absolute("b_adjacency_only", "subteams_used", Criterion("at_most", 1.1, 0.9)),
+        ),
+        (
+            "Fig. 7(c)",
+            "goal distance alone aligns subteams with their goals (goal distance, below the full loss')",
+            "aligned",
+            vs_full("c_goal_only", "goal_distance", "below"),
+        ),
+        (
+            "Fig. 7(d)",
+            "without balance the division is unbalanced (imbalance, above the full loss')",
+            "unbalanced",
+            vs_full("d_without_balance", "imbalance", "above"),
+        ),
+        (
+            "Fig. 7(e)",
+            "without adjacency the subteams are not compact (cut fraction, above the full loss')",
+            "uncompact",
+            vs_full("e_without_adjacency", "cut_fraction", "above"),
+        ),
+        (
+            "Fig. 7(f)",
+            "without the goal term subteams are misaligned with goals (goal distance, above the full loss')",
+            "misaligned",
+            vs_full("f_without_goal", "goal_distance", "above"),
+        ),
+    ]
+    return [Claim("STAF", a, s, p, "staf_ablation", m) for a, s, p, m in rows]
+
+
+def _team_size_claims() -> list[Claim]:
+    def circle(n: int) -> dict[str, Any]:
+        return {**cell("staf", "circle"), "n": n}
+
+    def all_sizes(ev: Evidence) -> Measured:
+        srs = [ev.number("sr", 100, " %", **circle(n)) for n in (4, 6, 7, 8)]
+        found = [s for s in srs if not math.isnan(s.value)]
+        worst = min(found, key=lambda s: s.value) if found else Number(math.nan)
+        return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR over teams of 4, 6, 7, 8")
+
+    return [
+        Claim(
+            "STAF",
+            "Fig. 8(e)",
+            "CFI of 4 robots at sigma < 0.03",
+            "87 %",
+            "staf_team_size",
+            lambda ev: Measured(
+                ev.number("cfi_0.01", 100, " %", **circle(4)), Criterion("at_least", 87, 10), "sigma 0.01"
+            ),
+        ),
+        Claim(
+            "STAF",
+            "Fig. 8(e)",
+            "CFI of 8 robots at sigma < 0.03",
+            "at least 80 %",
+            "staf_team_size",
+            lambda ev: Measured(
+                ev.number("cfi_0.01", 100, " %", **circle(8)), Criterion("at_least", 80, 10), "sigma 0.01"
+            ),
+        ),
+        Claim(
+            "STAF", "Fig. 8(a-d)", "teams of 4, 6, 7 and 8 robots pass the corridor", "all", "staf_team_size", all_sizes
+        ),
+    ]
+
+
+def _study_mean(ev: Evidence, study: str, column: str, **where: Any) -> Number:
+    df = ev.study(study)
+    for key, value in where.items():
+        if df.empty or key not in df:
+            return Number(math.nan)
+        df = df[df[key] == value]
+    if df.empty:
+        return Number(math.nan)
+    mean, ci = mean_ci(df[column])
+    return Number(mean, ci, len(df))
+
+
+def _study(name: str, column: str, criterion: Criterion, **where: Any) -> Callable[[Evidence], Measured]:
+    return lambda ev: Measured(_study_mean(ev, name, column, **where), criterion)
+
+
+def _graph_cut_claims() -> list[Claim]:
+    claims = [
+        Claim(
+            "STAF",
+            "Fig. 9",
+            f"a team of 10 divides into {m} balanced subteams (imbalance, robots; circle, wedge, line together)",
+            "handled",
+            "staf_subteam_count",
+            _study("subteam_count", "imbalance", Criterion("at_most", 1, 1), m=m),
+        )
+        for m in (2, 3, 4)
+    ]
+    for sigma, why in ((0.1, "0.1 m, a realistic position error"), (1.0, "1 m, standard normal noise")):
+        claims.append(
+            Claim(
+                "STAF",
+                "Fig. 14",
+                f"the division stays consistent under Gaussian position noise of {why} "
+                "(adjusted Rand index to the noise-free cut)",
+                "consistent",
+                "staf_noise",
+                _study("noise", "ari", Criterion("at_least", 0.9, 0.2), sigma=sigma),
+            )
+        )
+    return claims
+
+
+def _levels(ev: Evidence) -> dict[str, dict[str, pd.DataFrame]]:
+    """staf_levels' episodes by map (scenario and formation) and variant label."""
+    rows = ev.episodes
+    if rows.empty or "label" not in rows:
+        return {}
+    rows = rows[(rows["method"] == "staf") & rows["label"].isin(["a", "b"]) & (rows["faults"] == "")]
+    out: dict[str, dict[str, pd.DataFrame]] = {}
+    for (scenario, formation, label), g in rows.groupby(["scenario", "formation", "label"]):
+        out.setdefault(f"{scenario} {formation}", {})[str(label)] = g
+    return {k: v for k, v in out.items() if {"a", "b"} <= set(v)}
+
+
+def _beats(b: pd.DataFrame, a: pd.DataFrame, column: str, higher: bool) -> bool:
+    (mb, cb), (ma, ca) = mean_ci(b[column]), mean_ci(a[column])
+    cb, ca = (0.0 if math.isnan(c) else c for c in (cb, ca))
+    return mb - cb > ma + ca if higher else mb + cb < ma - ca
+
+
+def _learning_claims() -> list[Claim]:
+    def beats(ev: Evidence) -> Measured:
+        maps = _levels(ev)
+        hits = sum(
+            _beats(v["b"], v["a"], "sr", True) or _beats(v["b"], v["a"], "collisions", False) for v in maps.values()
+        )
+        return Measured(
+            Number(hits if maps else math.nan, 0, len(maps)),
+            Criterion("at_least", 1, 0),
+            "maps where (b) beats (a) outside the CIs in SR or collisions",
+        )
+
+    def worse(ev: Evidence) -> Measured:
+        maps = _levels(ev)
+        hits = sum(_beats(v["a"], v["b"], "sr", True) for v in maps.values())
+        return Measured(
+            Number(hits if maps else math.nan, 0, len(maps)),
+            Criterion("at_most", 0, 1),
+            "maps where (b)'s SR is below (a)'s outside the CIs",
+        )
+
+    def generated(ev: Evidence) -> Measured:
+        rows = ev.episodes
+        if rows.empty:
+            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+        rows = rows[(rows["method"] == "staf") & (rows["label"] == "b") & rows["scenario"].str.startswith("gen")]
+        srs = [mean_ci(g["sr"]) for _, g in rows.groupby("scenario")]
+        if not srs:
+            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+        worst = min(srs)
+        return Measured(
+            Number(100 * worst[0], 100 * worst[1], 0, " %"),
+            Criterion("at_least", 95, 10),
+            f"the lowest of {len(srs)} generated maps",
+        )
+
+    return [
+        Claim(
+            "STAF",
+            "Sec. 3 (ours: staf_levels)",
+            "the learned low level (b) beats no learning (a) on maps it was not trained on",
+            "the method's learned levels carry it",
+            "staf_levels",
+            beats,
+        ),
+        Claim(
+            "STAF",
+            "Sec. 3 (ours: staf_levels)",
+            "the learned low level (b) is nowhere worse than no learning (a) in SR",
+            "-",
+            "staf_levels",
+            worse,
+        ),
+        Claim(
+            "STAF",
+            "Generalisation (ours)",
+            "STAF succeeds on generated maps it was not trained on (holonomic and differential drive)",
+            "-",
+            "staf_levels",
+            generated,
+        ),
+    ]
+
+
+def _platform_claims() -> list[Claim]:
+    def diff(ev: Evidence) -> Measured:
+        srs = [ev.number("sr", 100, " %", **{**cell("staf", f), "drive": "diff_drive"}) for f in FORMATIONS]
+        found = [s for s in srs if not math.isnan(s.value)]
+        worst = min(found, key=lambda s: s.value) if found else Number(math.nan)
+        return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR of circle, wedge, line")
+
+    def builtin(ev: Evidence) -> Measured:
+        rows = ev.episodes
+        if rows.empty:
+            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+        rows = rows[(rows["method"] == "staf") & (rows["faults"] == "") & (rows["drive"] == "holonomic")]
+        rows = rows[~rows["scenario"].isin(["corridor"]) | rows["label"].isin(["gap-2m", "gap-3m", "long-10m"])]
+        rows = rows[~rows["label"].isin(["a", "c", "d", "m-auto"]) & ~rows["scenario"].str.startswith("gen")]
+        srs = [(mean_ci(g["sr"]), key) for key, g in rows.groupby(["scenario", "label"])]
+        if not srs:
+            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+        (mean, ci), key = min(srs, key=lambda s: s[0][0])
+        return Measured(
+            Number(100 * mean, 100 * ci, 0, " %"),
+            Criterion("at_least", 95, 10),
+            f"the lowest of {len(srs)} built-in maps and variants ({' '.join(map(str, key)).strip()})",
+        )
+
+    return [
+        Claim(
+            "STAF",
+            "App. F, platforms",
+            "STAF on differential-drive robots (Warthog, Limo) passes the corridor",
+            "qualitative (Fig. 5, 11-13)",
+            "staf_platforms",
+            diff,
+        ),
+        Claim(
+            "STAF",
+            "Generalisation (ours)",
+            "STAF passes every built-in map (doorway, bridge, narrowing, several "
+            "passages, bollards, forest, corridor 2 m / 3 m / 10 m long)",
+            "-",
+            "staf_generalisation",
+            builtin,
+        ),
+        Claim(
+            "STAF",
+            "App. F, platforms",
+            "DGNN on differential-drive robots is below STAF (line formation SR)",
+            "-",
+            "staf_platforms",
+            lambda ev: _above(
+                ev,
+                "sr",
+                {**cell("staf", "line"), "drive": "diff_drive"},
+                {**cell("dgnn", "line"), "drive": "diff_drive"},
+                "DGNN",
+            ),
+        ),
+    ]
+
+
+def staf_claims() -> list[Claim]:
+    return [
+        *_table1_claims(),
+        *_table2_and_fig4(),
+        *_fig7_claims(),
+        *_team_size_claims(),
+        *_graph_cut_claims(),
+        *_platform_claims(),
+        *_learning_claims(),
+    ]

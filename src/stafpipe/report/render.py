@@ -1,0 +1,87 @@
+"""REPRODUCTION.md and reproduction.csv: one row per claim, verdicts computed by `report.verdicts`."""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from pathlib import Path
+
+import pandas as pd
+
+from stafpipe.report.claims import Claim, Row, judge
+from stafpipe.report.claims_others import cezayirli_claims, zhu_claims
+from stafpipe.report.claims_staf import staf_claims
+from stafpipe.report.evidence import Evidence
+from stafpipe.report.verdicts import FAILS, HOLDS, MISSING, PARTLY
+
+
+def all_claims() -> list[Claim]:
+    return [*staf_claims(), *zhu_claims(), *cezayirli_claims()]
+
+
+def judge_all(evidence: Evidence, claims: list[Claim] | None = None) -> list[Row]:
+    return [judge(c, evidence) for c in (all_claims() if claims is None else claims)]
+
+
+def rows_frame(rows: list[Row]) -> pd.DataFrame:
+    return pd.DataFrame(
+        [
+            {
+                "paper": r.claim.paper,
+                "artifact": r.claim.artifact,
+                "claim": r.claim.statement,
+                "printed": r.claim.printed,
+                "ours": r.measured.ours.value,
+                "ours_ci95": r.measured.ours.ci,
+                "ours_n": r.measured.ours.n,
+                "criterion": r.measured.criterion.text(),
+                "verdict": r.verdict,
+                "note": r.measured.note,
+                "pipeline": r.claim.pipeline,
+            }
+            for r in rows
+        ]
+    )
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def markdown(rows: list[Row], figures: list[Path], out_dir: Path) -> str:
+    counts = Counter(r.verdict for r in rows)
+    lines = [
+        "# Reproduction report",
+        "",
+        "Written by `stafpipe run reproduce` (`stafpipe plot report` over the run directories of its steps). Each row",
+        "is a table, figure or claim of STAF, Zhu et al. (ICRA 2019) or Cezayirli & Kerestecioglu: the paper's number",
+        "or words, ours (mean ± 95 % CI over episodes, or over test teams for the graph-cut studies), the criterion,",
+        "and the verdict the criterion computes from the numbers (`src/stafpipe/report/`; nothing here is typed by",
+        "hand). CFI is ours (docs/metrics.md), with the printed gap term in the note where the runs carry it.",
+        "",
+        f"**{len(rows)} rows: {counts[HOLDS]} hold, {counts[PARTLY]} partly, {counts[FAILS]} do not hold, "
+        f"{counts[MISSING]} not measured.**",
+        "",
+        "| # | paper | artifact | claim | paper's | ours | criterion | verdict | note | pipeline |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for i, r in enumerate(rows, start=1):
+        ours = r.measured.ours.text(3 if abs(r.measured.ours.value) < 2 else 1)
+        verdict = f"**{r.verdict}**" if r.verdict == FAILS else r.verdict
+        cells = [
+            str(i),
+            r.claim.paper,
+            r.claim.artifact,
+            r.claim.statement,
+            r.claim.printed,
+            ours,
+            r.measured.criterion.text(),
+            verdict,
+            r.measured.note,
+            f"`{r.claim.pipeline}`",
+        ]
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+    if figures:
+        lines += ["", "## Figures", ""]
+        lines += [f"- [{f.parent.name}/{f.name}]({os.path.relpath(f, out_dir)})" for f in figures]
+    return "\n".join(lines) + "\n"
