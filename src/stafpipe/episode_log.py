@@ -19,7 +19,8 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import Writer as RawWriter
 from mcap_ros2.decoder import DecoderFactory
-from mcap_ros2.writer import Writer
+
+from stafpipe import cdr
 
 from stafpipe.errors import StafpipeError
 from stafpipe.mcap_check import Damage, check, intact_records, seal_data_crc
@@ -45,11 +46,6 @@ def _msgdef(datatype: str) -> str:
     return (_MSG_DIR / (datatype.replace("/msg/", "__") + ".msg")).read_text()
 
 
-def _stamp(t: float) -> dict[str, int]:
-    sec = math.floor(t)
-    return {"sec": int(sec), "nanosec": int(round((t - sec) * 1e9))}
-
-
 class EpisodeLogWriter:
     """Writes one episode; the file appears under its final name only when `close` completes."""
 
@@ -58,26 +54,25 @@ class EpisodeLogWriter:
         self.partial = self.path.with_name(self.path.name + ".part")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file: BinaryIO = open(self.partial, "w+b")  # noqa: SIM115 - closed in close()
-        self._writer = Writer(self._file, chunk_size=CHUNK_SIZE, enable_crcs=True)
-        self._schemas = {topic: self._writer.register_msgdef(dt, _msgdef(dt)) for topic, dt in TOPICS.items()}
+        self._writer = RawWriter(self._file, chunk_size=CHUNK_SIZE, enable_crcs=True)
+        self._writer.start(profile="ros2", library="stafpipe")
+        self._channels = {
+            topic: self._writer.register_channel(
+                topic=topic,
+                message_encoding="cdr",
+                schema_id=self._writer.register_schema(name=dt, encoding="ros2msg", data=_msgdef(dt).encode()),
+            )
+            for topic, dt in TOPICS.items()
+        }
 
-    def _write(self, topic: str, msg: dict[str, Any], t: float) -> None:
-        self._writer.write_message(topic, self._schemas[topic], msg, log_time=int(t * 1e9), publish_time=int(t * 1e9))
+    def _write(self, topic: str, data: bytes, t: float) -> None:
+        """One CDR-encoded message (`cdr`) on `topic` at time t."""
+        stamp = int(t * 1e9)
+        self._writer.add_message(channel_id=self._channels[topic], log_time=stamp, data=data, publish_time=stamp)
 
     def info(self, method: str, seed: int, scenario_yaml: str, context: dict[str, Any], goal: np.ndarray) -> None:
         """The episode's header: scenario, metric context, team goal."""
-        self._write(
-            "/episode",
-            {
-                "method": method,
-                "seed": seed,
-                "scenario_yaml": scenario_yaml,
-                "context_json": json.dumps(context),
-                "goal_x": goal[:, 0].tolist(),
-                "goal_y": goal[:, 1].tolist(),
-            },
-            0.0,
-        )
+        self._write("/episode", cdr.episode_info(method, seed, scenario_yaml, json.dumps(context), goal), 0.0)
 
     def state(
         self,
@@ -90,40 +85,16 @@ class EpisodeLogWriter:
         movers: np.ndarray,
     ) -> None:
         """One control step."""
-        poses = [
-            {
-                "position": {"x": float(p[0]), "y": float(p[1]), "z": 0.0},
-                "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(h / 2), "w": math.cos(h / 2)},
-            }
-            for p, h in zip(pos, heading, strict=True)
-        ]
-        self._write("/robots/poses", {"header": {"stamp": _stamp(t), "frame_id": "map"}, "poses": poses}, t)
-        self._write(
-            "/robots/state",
-            {
-                "stamp": _stamp(t),
-                "time": t,
-                "x": pos[:, 0].tolist(),
-                "y": pos[:, 1].tolist(),
-                "vx": vel[:, 0].tolist(),
-                "vy": vel[:, 1].tolist(),
-                "heading": heading.tolist(),
-                "target_x": targets[:, 0].tolist(),
-                "target_y": targets[:, 1].tolist(),
-                "subteam": subteams.astype(int).tolist(),
-                "mover_x": movers[:, 0].tolist(),
-                "mover_y": movers[:, 1].tolist(),
-            },
-            t,
-        )
+        self._write("/robots/poses", cdr.pose_array(t, pos, heading), t)
+        self._write("/robots/state", cdr.team_state(t, pos, vel, heading, targets, subteams, movers), t)
 
     def event(self, t: float, step: int, kind: str, robots: list[int], detail: str = "") -> None:
         """A split, merge, fault or collision."""
-        self._write("/events", {"time": t, "step": step, "kind": kind, "robots": robots, "detail": detail}, t)
+        self._write("/events", cdr.event(t, step, kind, robots, detail), t)
 
     def metrics(self, t: float, values: dict[str, float]) -> None:
         """The live metrics, at the end."""
-        self._write("/metrics", {"json": json.dumps(values)}, t)
+        self._write("/metrics", cdr.metrics(json.dumps(values)), t)
 
     def close(self) -> Path:
         """Finish the file (summary, footer) and move it to its final name."""

@@ -138,23 +138,38 @@ class Geometry:
             self._paths[key] = self._shortest_path(start, goal, clearance)
         return self._paths[key].copy()
 
+    def _graph(self, clearance: float) -> Any:
+        """The free cells' 16-neighbour graph (CSR) at this clearance, built once: every episode of L&F asks for a path
+        from its own perturbed start, and building the graph was half of each search."""
+
+        def build() -> Any:
+            xs, ys, clear = self.grid
+            free = clear >= clearance
+            h, w = free.shape
+            idx = np.arange(h * w).reshape(h, w)
+            rows, cols, costs = [], [], []
+            for di, dj in [(0, 1), (1, 0), (1, 1), (1, -1), (1, 2), (2, 1), (1, -2), (2, -1)]:
+                i0, i1 = max(0, -di), h - max(0, di)
+                j0, j1 = max(0, -dj), w - max(0, dj)
+                a, b = idx[i0:i1, j0:j1], idx[i0 + di : i1 + di, j0 + dj : j1 + dj]
+                ok = free[i0:i1, j0:j1] & free[i0 + di : i1 + di, j0 + dj : j1 + dj]
+                rows.append(a[ok])
+                cols.append(b[ok])
+                costs.append(np.full(int(ok.sum()), math.hypot(di, dj) * self.resolution))
+            shape = (h * w, h * w)
+            return coo_matrix(
+                (np.concatenate(costs), (np.concatenate(rows), np.concatenate(cols))), shape=shape
+            ).tocsr()
+
+        return self.remember(("graph", float(clearance)), build)
+
     def _shortest_path(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
-        xs, ys, clear = self.grid
-        free = clear >= clearance
-        h, w = free.shape
+        xs, ys, _ = self.grid
+        h, w = len(ys), len(xs)
         idx = np.arange(h * w).reshape(h, w)
-        rows, cols, costs = [], [], []
-        for di, dj in [(0, 1), (1, 0), (1, 1), (1, -1), (1, 2), (2, 1), (1, -2), (2, -1)]:
-            i0, i1 = max(0, -di), h - max(0, di)
-            j0, j1 = max(0, -dj), w - max(0, dj)
-            a, b = idx[i0:i1, j0:j1], idx[i0 + di : i1 + di, j0 + dj : j1 + dj]
-            ok = free[i0:i1, j0:j1] & free[i0 + di : i1 + di, j0 + dj : j1 + dj]
-            rows.append(a[ok])
-            cols.append(b[ok])
-            costs.append(np.full(int(ok.sum()), math.hypot(di, dj) * self.resolution))
-        graph = coo_matrix((np.concatenate(costs), (np.concatenate(rows), np.concatenate(cols))), shape=(h * w, h * w))
+        graph = self._graph(clearance)
         s, g = self._cell(start), self._cell(goal)
-        dist, pred = dijkstra(graph.tocsr(), directed=False, indices=idx[s], return_predecessors=True)
+        dist, pred = dijkstra(graph, directed=False, indices=idx[s], return_predecessors=True)
         if not np.isfinite(dist[idx[g]]):
             raise ValueError(f"no path from {start} to {goal} with clearance {clearance}")
         cells = [idx[g]]
