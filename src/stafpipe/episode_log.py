@@ -8,7 +8,6 @@ Chunks carry CRCs and are small, so a killed run loses at most its last chunk; `
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +20,6 @@ from mcap.writer import Writer as RawWriter
 from mcap_ros2.decoder import DecoderFactory
 
 from stafpipe import cdr
-
 from stafpipe.errors import StafpipeError
 from stafpipe.mcap_check import Damage, check, intact_records, seal_data_crc
 

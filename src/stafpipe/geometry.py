@@ -143,7 +143,7 @@ class Geometry:
         from its own perturbed start, and building the graph was half of each search."""
 
         def build() -> Any:
-            xs, ys, clear = self.grid
+            _xs, _ys, clear = self.grid
             free = clear >= clearance
             h, w = free.shape
             idx = np.arange(h * w).reshape(h, w)
