@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
+from stafpipe.controllers.orca import orca_velocities
+from stafpipe.controllers.staf_plan import separated
 from stafpipe.controllers.zhu_decisions import (
     StuckDetector,
     comm_components,
@@ -104,6 +106,18 @@ class ZhuConfig:
     stop_gap: float = 0.1
     """The gap (m) at which the approach stops (L&F uses 0.02; at 1.5 m/s and 3 m/s^2 a team that reshuffles its
     slots needs the larger margin: Scenario 2 had 19 contacts per episode with 0.02, 9 with 0.1)."""
+    local_planner: str = "orca"
+    """How the robots track their slots (Zhu et al. 2019 Sec. III use the collision-avoiding MPC of [22]): `orca`,
+    reciprocal velocity obstacles (controllers.orca, van den Berg et al. 2011); `cap`, the proportional step with
+    the classical methods' approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28."""
+    target_gap: float = 0.1
+    """Ours: targets of two robots closer than 2 r + target_gap are pushed apart (as STAF's plan does); 0: off."""
+    orca_horizon: float = 1.0
+    """ORCA's time horizon (s): velocities keep every neighbour clear for this long."""
+    orca_margin: float = 0.1
+    """ORCA's clearance (m) added to the robots' and obstacles' radii."""
+    orca_recovery: float = 0.1
+    """Time (s) in which ORCA separates two robots that already touch (one control period of the world)."""
     n_dead: int = 30
     """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
     dp_min: float = 0.15
@@ -134,6 +148,15 @@ class ZhuConfig:
                 self.v_min,
             )
         require(self.p_max > 0, f"{key}.p_max", "must be > 0", self.p_max)
+        require(
+            self.local_planner in ("orca", "cap"), f"{key}.local_planner", "must be orca or cap", self.local_planner
+        )
+        require(
+            self.orca_horizon > 0 and self.orca_recovery > 0 and self.orca_margin >= 0 and self.target_gap >= 0,
+            f"{key}.orca_horizon/orca_recovery/orca_margin/target_gap",
+            "must be > 0 / > 0 / >= 0 / >= 0",
+            (self.orca_horizon, self.orca_recovery, self.orca_margin, self.target_gap),
+        )
         require(self.max_subteams >= 2, f"{key}.max_subteams", "must be >= 2", self.max_subteams)
         require(
             self.reference_speed > 0 and self.max_lag > 0,
@@ -301,8 +324,11 @@ class ZhuController(Controller):
         v = cfg.gain * (self._targets - p)
         speed = np.linalg.norm(v, axis=1, keepdims=True)
         v *= np.minimum(1.0, self.speed / np.maximum(speed, 1e-9))
-        v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain, cfg.stop_gap)
-        return v
+        if cfg.local_planner == "orca":
+            return orca_velocities(
+                v, obs, self.radius, self.speed, cfg.orca_horizon, cfg.orca_recovery, cfg.orca_margin, self.mover_radius
+            )
+        return limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain, cfg.stop_gap)
 
     @contextmanager
     def _timed(self, part: str) -> Iterator[None]:
@@ -423,11 +449,16 @@ class ZhuController(Controller):
                 slots = self.goal
             else:
                 slots = self._fit(k, region, len(members), ref, heading)
-            if slots is None:  # no formation fits: each robot on its own, as [20] breaks the formation
-                alone = [fit_centres(self.regions[i], [np.zeros((1, 2))], ref)[0] for i in members]
+            if slots is None:  # no formation fits: each robot on its own, as [20] breaks the formation; each heads
+                # for where the team's shift to p_r takes it, kept inside its own region (towards p_r itself, every
+                # robot got the same target and only the local planner kept them apart: 10 contacts per Scenario 2)
+                shift = ref - p[members].mean(axis=0)
+                alone = [fit_centres(self.regions[i], [np.zeros((1, 2))], p[i] + shift)[0] for i in members]
                 slots = np.array([c if c is not None else p[i] for c, i in zip(alone, members, strict=True)])
             perm = assign_slots(p[members], slots)
             self._targets[members] = slots[perm]
+        if self.cfg.target_gap > 0:  # ours: no two robots sent to within a body of each other (fallbacks, teams' edges)
+            self._targets = separated(self._targets, 2 * self.radius + self.cfg.target_gap)
 
     def _clear_of_other_teams(self, p: np.ndarray) -> dict[int, Region]:
         """Ours ([20] leaves robots of other teams to the local planner): for each team, the half-planes that keep its
