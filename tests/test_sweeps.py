@@ -35,3 +35,17 @@ def test_submitit_local_two_jobs(workdir) -> None:
     assert code == 0
     dirs = job_dirs(workdir / "outputs" / "multirun")
     assert [OmegaConf.load(d / "config.yaml").seed for d in dirs] == [5, 6]
+
+
+@pytest.mark.slow  # a local Ray cluster starts: about 30 s
+def test_ray_sweep_of_two_eval_jobs_gathers_into_one_table(workdir) -> None:
+    pytest.importorskip("hydra_plugins.hydra_ray_launcher", reason="needs the ray extra: pip install '.[ray]'")
+    short = ["method=straight", "scenario=corridor", "scenario.time_limit=2", "eval.episodes=1"]
+    assert launch("eval", ["-m", "hydra/launcher=ray", *short, "seed=1,2"]) == 0
+    dirs = job_dirs(workdir / "outputs" / "multirun")
+    assert sorted(OmegaConf.load(d / "config.yaml").seed for d in dirs) == [1, 2]
+    assert all((d / "results.csv").is_file() and list(d.glob("episodes/*.mcap")) for d in dirs)
+    # a sweep's job directories are read by `plot table` exactly as a pipeline's steps are
+    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{','.join(map(str, dirs))}]"]) == 0
+    [table_dir] = [d for d in job_dirs(workdir / "outputs") if (d / "table.csv").is_file()]
+    assert "straight" in (table_dir / "table.md").read_text()
