@@ -62,7 +62,7 @@ def test_a_crowd_swapping_sides_of_a_circle_stays_contact_free() -> None:
     angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
     start = 2.0 * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     start += np.random.default_rng(0).normal(0, 0.02, start.shape)  # a perfectly symmetric crowd deadlocks
-    p, closest = _run(start, -start, steps=200)
+    _, closest = _run(start, -start, steps=200)
     assert closest >= 2 * R - 1e-6  # ORCA keeps them apart (a symmetric crowd may stall: ORCA's known deadlock)
 
 

@@ -8,6 +8,7 @@ import math
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from stafpipe.report.claims import Claim, Measured, fraction
@@ -224,6 +225,25 @@ def _cz(ev: Evidence, scenario: str, occlusion: bool = True) -> pd.DataFrame:
     ]
 
 
+def _progress(rows: pd.DataFrame) -> Number:
+    """How much of the way from the start to the goal the team's centroid made, per episode, from the logs: 1 - (final
+    distance to the goal slots' centroid) / (initial distance). Cezayirli's robots carry no IDs and end as a group, not
+    on goal slots, so SR does not measure what the paper shows (docs/cezayirli.md)."""
+    from stafpipe.episode_log import read_episode
+    from stafpipe.plots.staf_tables import mean_ci
+
+    if rows.empty:
+        return Number(math.nan)
+    made = []
+    for d, e in zip(rows["run_dir"].tolist(), rows["episode"].tolist(), strict=True):
+        rec = read_episode(Path(str(d)) / "episodes" / f"episode_{int(e):04d}.mcap")
+        goal = rec.goal.mean(axis=0)
+        start, end = (float(np.linalg.norm(rec.positions[k].mean(axis=0) - goal)) for k in (0, -1))
+        made.append(1.0 - end / max(start, 1e-9))
+    mean, ci = mean_ci(pd.Series(made))
+    return Number(100 * mean, 100 * ci, len(made), " %")
+
+
 def cezayirli_claims() -> list[Claim]:
     def links(ev: Evidence) -> Measured:
         rows = _cz(ev, "cezayirli_corridors")
@@ -239,10 +259,10 @@ def cezayirli_claims() -> list[Claim]:
     def connected(ev: Evidence) -> Measured:
         rows = pd.concat([_cz(ev, "cezayirli_corridors"), _cz(ev, "cezayirli_v")])
         if rows.empty:
-            return Measured(Number(math.nan), Criterion("above", 0))
+            return Measured(Number(math.nan), Criterion("above", 0, min_effect=1e-9))
         return Measured(
             Number(float(rows["lambda2_min"].min()), 0, len(rows)),
-            Criterion("above", 0),
+            Criterion("above", 0, min_effect=1e-9),
             "smallest algebraic connectivity of the sensed graph, both simulations",
         )
 
@@ -254,7 +274,9 @@ def cezayirli_claims() -> list[Claim]:
             "all pass",
             "cezayirli",
             lambda ev: Measured(
-                _number(_cz(ev, "cezayirli_corridors"), "sr", 100, " %"), Criterion("at_least", 95, 10), "SR"
+                _progress(_cz(ev, "cezayirli_corridors")),
+                Criterion("at_least", 95, 10),
+                "share of the way to the goal the team's centroid made",
             ),
         ),
         Claim("Cezayirli", "Fig. 4", "the number of links never falls below N - 1", ">= N - 1", "cezayirli", links),
@@ -272,7 +294,11 @@ def cezayirli_claims() -> list[Claim]:
             "simulation 2: 11 robots in a 120 degree V reach the goal",
             "all",
             "cezayirli",
-            lambda ev: Measured(_number(_cz(ev, "cezayirli_v"), "sr", 100, " %"), Criterion("at_least", 95, 10), "SR"),
+            lambda ev: Measured(
+                _progress(_cz(ev, "cezayirli_v")),
+                Criterion("at_least", 95, 10),
+                "share of the way to the goal the team's centroid made",
+            ),
         ),
         Claim(
             "Cezayirli",

@@ -46,6 +46,9 @@ class Criterion:
     target: float
     slack: float = 0.0
     target_ci: float = 0.0
+    min_effect: float = 0.0
+    """above/below: the least difference that counts at all (a difference of a few thousandths outside tight CIs is
+    not a finding)."""
 
     def __post_init__(self) -> None:
         if self.kind not in ("at_least", "at_most", "near", "above", "below"):
@@ -64,8 +67,10 @@ class Criterion:
             return HOLDS if d <= s + h else PARTLY if d <= 2 * s + h else FAILS
         other = 0.0 if math.isnan(self.target_ci) else self.target_ci
         if self.kind == "below":
-            return HOLDS if v + h < t - other else PARTLY if v < t else FAILS
-        return HOLDS if v - h > t + other else PARTLY if v > t else FAILS
+            v, t = -v, -t  # below t is above -t
+        if v - t < self.min_effect:
+            return FAILS
+        return HOLDS if v - h > t + other else PARTLY
 
     def text(self, digits: int = 1) -> str:
         t, s = f"{self.target:.{digits}f}", f"{self.slack:.{digits}f}"
@@ -75,6 +80,7 @@ class Criterion:
             return f"holds if ours (- CI) <= {t}; partly if <= {self.target + self.slack:.{digits}f}"
         if self.kind == "near":
             return f"holds if within {s} (+ CI) of {t}; partly if within {2 * self.slack:.{digits}f}"
+        effect = f" by at least {self.min_effect:g}" if self.min_effect else ""
         if self.kind == "below":
-            return f"holds if ours is below {t} outside both CIs; partly if ours < {t}"
-        return f"holds if ours exceeds {t} outside both CIs; partly if ours > {t}"
+            return f"holds if ours is below {t}{effect} outside both CIs; partly if below{effect} within them"
+        return f"holds if ours exceeds {t}{effect} outside both CIs; partly if above{effect} within them"
