@@ -1,8 +1,10 @@
 """Trainer throughput: environment robot-steps per second of PPO rollouts including the policy forward pass, and the
-update time per sample, for the DGNN policy on the 10-robot corridor.
+update time per sample, for the DGNN policy on the 10-robot corridor, beside the plain-torch reference: the same
+network, the same minibatches and epochs, one forward, a squared-error loss on its outputs, backward and an Adam step,
+nothing else (what any trainer of this network must pay; the PPO update's excess over it is our overhead).
 
 Usage: python benchmarks/ppo_throughput.py [--steps 100]
-Prints one row per number of batched worlds (B = 4, 16, 64).
+Prints one row per number of batched worlds (B = 4, 16, 64) and the device (CPU, 2 threads).
 """
 
 from __future__ import annotations
@@ -30,8 +32,12 @@ def main() -> None:
     torch.manual_seed(0)
     corridor = load_named_scenario("corridor")
     path, eta = path_and_width(corridor)
-    print(f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | {'overall robot-steps/s':>21}")
-    print("-" * 76)
+    print(f"device: cpu, {torch.get_num_threads()} threads")
+    print(
+        f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | {'plain torch us / sample':>23} | "
+        f"{'ratio':>5} | {'overall robot-steps/s':>21}"
+    )
+    print("-" * 112)
     for b in (4, 16, 64):
         tc = TrainPPOConfig(worlds=b, episode_steps=args.steps)
         policy = DGNNPolicy(PolicyConfig())
@@ -48,9 +54,31 @@ def main() -> None:
         update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))
         upd = time.perf_counter() - start
         samples = ro.rewards.numel()
+        ref = plain_update(policy, ro, tc)
         print(
-            f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {samples / (rollout + upd):>21,.0f}"
+            f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {1e6 * ref / samples:>23.1f} | "
+            f"{upd / ref:>5.2f} | {samples / (rollout + upd):>21,.0f}"
         )
+
+
+def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig) -> float:
+    """Seconds for tc.epochs x tc.minibatches plain steps of the same network on the same samples (see the docstring)."""
+    t, b = ro.rewards.shape[:2]
+    own, edge, mask = (x.reshape(t * b, *x.shape[2:]) for x in (ro.own, ro.edge, ro.mask))
+    act_target, value_target = ro.actions.reshape(t * b, *ro.actions.shape[2:]), ro.values.reshape(t * b, -1)
+    opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
+    size = t * b // tc.minibatches
+    start = time.perf_counter()
+    for _ in range(tc.epochs):
+        order = torch.randperm(t * b)
+        for k in range(tc.minibatches):
+            mb = order[k * size : (k + 1) * size]
+            mean, value = policy(own[mb], edge[mb], mask[mb])
+            loss = ((mean - act_target[mb]) ** 2).mean() + ((value - value_target[mb]) ** 2).mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    return time.perf_counter() - start
 
 
 if __name__ == "__main__":
