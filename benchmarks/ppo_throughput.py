@@ -34,8 +34,8 @@ def main() -> None:
     path, eta = path_and_width(corridor)
     print(f"device: cpu, {torch.get_num_threads()} threads")
     print(
-        f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | {'plain torch us / sample':>23} | "
-        f"{'ratio':>5} | {'overall robot-steps/s':>21}"
+        f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | "
+        f"{'plain torch us / sample':>23} | {'ratio':>5} | {'overall robot-steps/s':>21}"
     )
     print("-" * 112)
     for b in (4, 16, 64):
@@ -62,7 +62,7 @@ def main() -> None:
 
 
 def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig) -> float:
-    """Seconds for tc.epochs x tc.minibatches plain steps of the same network on the same samples (see the docstring)."""
+    """Seconds for tc.epochs x tc.minibatches plain steps of the same network on the same samples (module docstring)."""
     t, b = ro.rewards.shape[:2]
     own, edge, mask = (x.reshape(t * b, *x.shape[2:]) for x in (ro.own, ro.edge, ro.mask))
     act_target, value_target = ro.actions.reshape(t * b, *ro.actions.shape[2:]), ro.values.reshape(t * b, -1)
