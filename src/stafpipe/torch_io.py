@@ -28,3 +28,12 @@ def load_payload(path: Path, error: type[StafpipeError], what: str, hint: str = 
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 (torch raises several kinds for a damaged file)
         raise error(f"{path}: not a readable {what} ({type(exc).__name__}: {exc})") from None
+
+
+def training_device(name: str, key: str) -> torch.device:
+    """The torch device a training stage asked for (`cpu`, `cuda` or `cuda:N`), checked again here for callers that
+    skip the config check (the project never needs one; the simulator always runs on the CPU)."""
+    from stafpipe.devices import check_device
+
+    check_device(name, key)
+    return torch.device(name)

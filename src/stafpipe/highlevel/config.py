@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from stafpipe.devices import check_device
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
 
@@ -99,6 +100,9 @@ class TrainHighConfig:
     loss: LossWeights = field(default_factory=LossWeights)
     threads: int = 2
     """torch threads (this project's machines have 2 cores)."""
+    device: str = "cpu"
+    """Where the network and its training run: `cpu`, or `cuda` / `cuda:N` where the machine has one (a clear error
+    where it has not). The data are built on the CPU; the checkpoint is saved for the CPU either way."""
 
     def check(self, key: str = "train_high") -> None:
         require(self.epochs >= 1, f"{key}.epochs", "must be >= 1", self.epochs)
@@ -112,6 +116,7 @@ class TrainHighConfig:
             list(self.m_choices),
         )
         require(self.threads >= 1, f"{key}.threads", "must be >= 1", self.threads)
+        check_device(self.device, f"{key}.device")
         self.loss.check(f"{key}.loss")
 
 

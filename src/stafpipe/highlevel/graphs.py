@@ -53,6 +53,10 @@ class TeamBatch(NamedTuple):
     sizes: torch.Tensor
     """(T,) long: robots per team."""
 
+    def to(self, device: torch.device) -> TeamBatch:
+        """The same batch on `device` (train_high.device)."""
+        return TeamBatch(*(t.to(device) for t in self))
+
 
 def radius_edges(pos: np.ndarray, radius: float) -> np.ndarray:
     """(2, E) directed edges between robots closer than `radius` (STAF's a_ij = 1), a KD-tree query (scales to

@@ -24,9 +24,10 @@ TERMS = ("adjacency", "balance", "goal")
 def subteam_sums(y: torch.Tensor, batch: TeamBatch) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Per team and subteam: soft sizes sum_i y_ij (T, M), sum_i y_ij p_i and sum_i y_ij g_i (T, M, 2)."""
     t, mm = len(batch.sizes), y.shape[1]
-    size = torch.zeros(t, mm).index_add_(0, batch.team, y)
-    sp = torch.zeros(t, mm, 2).index_add_(0, batch.team, y[:, :, None] * batch.pos[:, None, :])
-    sg = torch.zeros(t, mm, 2).index_add_(0, batch.team, y[:, :, None] * batch.goal[:, None, :])
+    on = y.device
+    size = torch.zeros(t, mm, device=on).index_add_(0, batch.team, y)
+    sp = torch.zeros(t, mm, 2, device=on).index_add_(0, batch.team, y[:, :, None] * batch.pos[:, None, :])
+    sg = torch.zeros(t, mm, 2, device=on).index_add_(0, batch.team, y[:, :, None] * batch.goal[:, None, :])
     return size, sp, sg
 
 
@@ -40,17 +41,17 @@ def loss_terms(y: torch.Tensor, batch: TeamBatch) -> dict[str, torch.Tensor]:
     # subteams)
     cut = 1.0 - (y[src] * y[dst]).sum(dim=1)
     edge_team = batch.team[dst]
-    cut_sum = torch.zeros(t).index_add_(0, edge_team, cut)
-    edge_count = torch.zeros(t).index_add_(0, edge_team, torch.ones_like(cut))
+    cut_sum = torch.zeros(t, device=y.device).index_add_(0, edge_team, cut)
+    edge_count = torch.zeros(t, device=y.device).index_add_(0, edge_team, torch.ones_like(cut))
     adjacency = cut_sum / edge_count.clamp_min(1.0)
     size, sp, sg = subteam_sums(y, batch)
-    valid = torch.arange(mm)[None, :] < batch.m[:, None]
+    valid = torch.arange(mm, device=y.device)[None, :] < batch.m[:, None]
     dev = ((size - (n / m)[:, None]) ** 2 * valid).sum(dim=1)
     balance = torch.where(m > 1, dev / (n**2 * (m - 1) / m).clamp_min(1e-9), torch.zeros_like(dev))
     # n_j || c^p_j - c^g_j || = || sum_i y_ij (p_i - g_i) ||
     weighted_gap = torch.linalg.vector_norm(sp - sg, dim=2)
-    p_bar = torch.zeros(t, 2).index_add_(0, batch.team, batch.pos) / n[:, None]
-    g_bar = torch.zeros(t, 2).index_add_(0, batch.team, batch.goal) / n[:, None]
+    p_bar = torch.zeros(t, 2, device=y.device).index_add_(0, batch.team, batch.pos) / n[:, None]
+    g_bar = torch.zeros(t, 2, device=y.device).index_add_(0, batch.team, batch.goal) / n[:, None]
     scale = (n * torch.linalg.vector_norm(p_bar - g_bar, dim=1)).clamp_min(1e-6)
     goal = (weighted_gap * valid).sum(dim=1) / scale
     return {"adjacency": adjacency, "balance": balance, "goal": goal}
@@ -59,7 +60,7 @@ def loss_terms(y: torch.Tensor, batch: TeamBatch) -> dict[str, torch.Tensor]:
 def balance_printed(y: torch.Tensor, batch: TeamBatch) -> torch.Tensor:
     """The balance term exactly as printed in Eq. (1), per team: sum_j (sum_i y_ij - n/m). Identically 0 (method.md)."""
     size, _, _ = subteam_sums(y, batch)
-    valid = torch.arange(y.shape[1])[None, :] < batch.m[:, None]
+    valid = torch.arange(y.shape[1], device=y.device)[None, :] < batch.m[:, None]
     return ((size - (batch.sizes.float() / batch.m.float())[:, None]) * valid).sum(dim=1)
 
 

@@ -22,11 +22,11 @@ from stafpipe.highlevel.graphs import TeamBatch
 def scatter_softmax(scores: torch.Tensor, index: torch.Tensor, size: int) -> torch.Tensor:
     """Softmax of `scores` (E, H) over the entries that share an `index` (E,) (the neighbours of one node)."""
     idx = index[:, None].expand_as(scores)
-    peak = torch.full((size, scores.shape[1]), -torch.inf, dtype=scores.dtype).scatter_reduce(
+    peak = torch.full((size, scores.shape[1]), -torch.inf, dtype=scores.dtype, device=scores.device).scatter_reduce(
         0, idx, scores, reduce="amax", include_self=True
     )
     e = torch.exp(scores - peak[index])
-    total = torch.zeros((size, scores.shape[1]), dtype=scores.dtype).index_add_(0, index, e)
+    total = torch.zeros((size, scores.shape[1]), dtype=scores.dtype, device=scores.device).index_add_(0, index, e)
     return e / total[index]
 
 
@@ -83,7 +83,7 @@ class DeepGraphCut(nn.Module):
         m_node = batch.m[batch.team]
         one_hot = nn.functional.one_hot(m_node - 1, self.cfg.m_max).float()
         logits = self.tau(torch.cat([h, one_hot], dim=1))
-        allowed = torch.arange(self.cfg.m_max)[None, :] < m_node[:, None]
+        allowed = torch.arange(self.cfg.m_max, device=m_node.device)[None, :] < m_node[:, None]
         return torch.softmax(logits.masked_fill(~allowed, -torch.inf), dim=1)
 
 

@@ -25,7 +25,7 @@ from stafpipe.highlevel.graphs import TeamGraph, collate
 from stafpipe.highlevel.loss import TERMS, loss_terms, total_loss
 from stafpipe.highlevel.model import DeepGraphCut
 from stafpipe.progress import progress
-from stafpipe.torch_io import save_payload
+from stafpipe.torch_io import save_payload, training_device
 from stafpipe.training_record import commit
 
 log = logging.getLogger(__name__)
@@ -39,11 +39,12 @@ def _draw_m(rng: np.random.Generator, graphs: list[TeamGraph], choices: list[int
 def evaluate(
     model: DeepGraphCut, graphs: list[TeamGraph], ms: list[int], w: LossWeights, batch_size: int = 512
 ) -> dict[str, float]:
-    """Mean loss terms and weighted total over `graphs` (no gradient)."""
+    """Mean loss terms and weighted total over `graphs` (no gradient), on the model's device."""
     sums = dict.fromkeys([*TERMS, "total"], 0.0)
+    device = next(model.parameters()).device
     with torch.no_grad():
         for start in range(0, len(graphs), batch_size):
-            batch = collate(graphs[start : start + batch_size], ms[start : start + batch_size])
+            batch = collate(graphs[start : start + batch_size], ms[start : start + batch_size]).to(device)
             terms = loss_terms(model(batch), batch)
             for k in TERMS:
                 sums[k] += float(terms[k].sum())
@@ -64,8 +65,9 @@ def train(
     """Train on `graphs`; after every epoch the whole state goes to `out_dir/last.pt`, so a rerun of the same config in
     the same directory continues where a killed one stopped and ends with the same weights as an uninterrupted run."""
     torch.set_num_threads(tc.threads)
+    device = training_device(tc.device, "train_high.device")
     torch.manual_seed(seed)
-    model = DeepGraphCut(high)
+    model = DeepGraphCut(high).to(device)  # initialised on the CPU (the same weights for a seed), then moved
     opt = torch.optim.Adam(model.parameters(), lr=tc.lr)
     n_val = int(round(len(graphs) * tc.val_fraction))
     train_set, val_set = graphs[n_val:], graphs[:n_val]
@@ -79,7 +81,7 @@ def train(
         state = torch.load(state_path, map_location="cpu", weights_only=True)
         if state.get("config_hash") == config_hash:
             model.load_state_dict(state["model"])
-            opt.load_state_dict(state["optimizer"])
+            opt.load_state_dict(state["optimizer"])  # (its state follows the parameters' device)
             history, start_epoch = state["history"], int(state["epoch"])
             log.info("resuming from epoch %d of %s", start_epoch, state_path)
         else:
@@ -95,7 +97,7 @@ def train(
         sums = dict.fromkeys([*TERMS, "total"], 0.0)
         for k in range(steps):
             idx = order[k * tc.batch_size : (k + 1) * tc.batch_size]
-            batch = collate([train_set[i] for i in idx], [ms[i] for i in idx])
+            batch = collate([train_set[i] for i in idx], [ms[i] for i in idx]).to(device)
             terms = loss_terms(model(batch), batch)
             loss = total_loss(terms, tc.loss)
             opt.zero_grad()
@@ -128,6 +130,7 @@ def train(
         "commit": commit(),
         "final": history[-1] if history else {},
     }
+    model = model.cpu()  # the checkpoint, and the model returned, are for the CPU whatever trained them
     save_checkpoint(out_dir / "high_level.pt", model, made_by)
     return model, history
 

@@ -143,6 +143,10 @@ class TrainPPOConfig:
     resume: bool = False
     """Continue from the newest state of the same config (this run directory first, then outputs/train-ppo/)."""
     threads: int = 2
+    device: str = "cpu"
+    """Where the PPO update runs: `cpu`, or `cuda` / `cuda:N` where the machine has one (a clear error where it has
+    not). The rollouts (simulator, features, the policy's forward pass) stay on the CPU; the checkpoint is for the
+    CPU either way."""
     reward: RewardConfig = field(default_factory=RewardConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
     imitation: ImitationConfig = field(default_factory=ImitationConfig)
@@ -173,6 +177,9 @@ class TrainPPOConfig:
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
+        from stafpipe.devices import check_device
+
+        check_device(self.device, f"{key}.device")
         require(self.validation_episodes >= 1, f"{key}.validation_episodes", "must be >= 1", self.validation_episodes)
         require(
             not self.validation or self.eval_every >= 1,

@@ -30,13 +30,17 @@ from stafpipe.learning.teachers import teacher_actions
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.torch_io import save_payload
+from stafpipe.torch_io import save_payload, training_device
 from stafpipe.world import WorldConfig, Worlds
 
 log = logging.getLogger(__name__)
 STATE_FILE = "ppo_state.pt"
 EVAL_SEED = 10_000_019  # evaluation episodes use seeds EVAL_SEED + world, never a training draw
 VALIDATION_SEED = 20_000_033  # held-out validation episodes: VALIDATION_SEED + world
+
+
+def _on(ro: Rollout, device: torch.device) -> Rollout:
+    return Rollout(*(x.to(device) for x in ro))
 
 
 def update(
@@ -47,8 +51,21 @@ def update(
     ret: torch.Tensor,
     tc: TrainPPOConfig,
     gen: torch.Generator,
+    device: torch.device | None = None,
 ) -> dict[str, float]:
-    """`tc.epochs` passes of minibatch updates over world-steps (a sample keeps its world's n robots together)."""
+    """`tc.epochs` passes of minibatch updates over world-steps (a sample keeps its world's n robots together). On
+    `device` (train_ppo.device) the network, its optimizer state and the samples move there for the update; the
+    network comes back to the CPU for the next rollout."""
+    if device is not None and device.type != "cpu":
+        policy.to(device)  # in place: the optimizer keeps the same parameters
+        for state in opt.state.values():
+            for name, value in state.items():
+                if torch.is_tensor(value):
+                    state[name] = value.to(device)
+        try:
+            return update(policy, opt, _on(ro, device), adv.to(device), ret.to(device), tc, gen)
+        finally:
+            policy.cpu()
     t, b = ro.rewards.shape[:2]
     flat = lambda x: x.reshape(t * b, *x.shape[2:])  # noqa: E731
     b_own, b_edge, b_mask, b_act = flat(ro.own), flat(ro.edge), flat(ro.mask), flat(ro.actions)
@@ -65,7 +82,7 @@ def update(
     for _ in range(tc.epochs):
         order = torch.randperm(t * b, generator=gen)
         for k in range(tc.minibatches):
-            mb = order[k * size : (k + 1) * size]
+            mb = order[k * size : (k + 1) * size].to(b_own.device)
             mean, value = policy(b_own[mb], b_edge[mb], b_mask[mb])
             dist = policy.distribution(mean)
             logp = dist.log_prob(b_act[mb]).sum(-1)
@@ -210,6 +227,7 @@ def train_ppo(
     """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state.
     With `validation` (batches of held-out worlds), the returned network is the one of `best_iteration`."""
     torch.set_num_threads(tc.threads)
+    device = training_device(tc.device, "train_ppo.device")
     torch.manual_seed(seed)
     adapter = ADAPTERS[tc.method](tc.policy, tc.reward, tc.plan, sensing.radius)
     policy = adapter.network(tc.policy)
@@ -245,7 +263,7 @@ def train_ppo(
         ro, stats = collect(policy, adapter, worlds, obs, tc, tolerance)
         collected = time.perf_counter()
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
-        losses = update(policy, opt, ro, adv, ret, tc, gen)
+        losses = update(policy, opt, ro, adv, ret, tc, gen, device)
         done = time.perf_counter()
         samples = ro.rewards.numel()
         done_before = history[-1]["robot_steps"] if history else 0.0  # team sizes differ between iterations
