@@ -21,18 +21,21 @@ from stafpipe.learning.ppo import teams_of, update
 from stafpipe.learning.rollout import collect, gae
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
+from stafpipe.torch_io import training_device
 from stafpipe.world import Worlds
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--device", default="cpu", help="where the update runs: cpu, cuda or cuda:N")
     args = parser.parse_args()
+    device = training_device(args.device, "--device")
     torch.set_num_threads(2)
     torch.manual_seed(0)
     corridor = load_named_scenario("corridor")
     path, eta = path_and_width(corridor)
-    print(f"device: cpu, {torch.get_num_threads()} threads")
+    print(f"update device: {device}; rollouts on the cpu, {torch.get_num_threads()} threads")
     print(
         f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | "
         f"{'plain torch us / sample':>23} | {'ratio':>5} | {'overall robot-steps/s':>21}"
@@ -51,34 +54,40 @@ def main() -> None:
         rollout = time.perf_counter() - start
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
         start = time.perf_counter()
-        update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))
+        update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0), device)
         upd = time.perf_counter() - start
         samples = ro.rewards.numel()
-        ref = plain_update(policy, ro, tc)
+        ref = plain_update(policy, ro, tc, device)
         print(
             f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {1e6 * ref / samples:>23.1f} | "
             f"{upd / ref:>5.2f} | {samples / (rollout + upd):>21,.0f}"
         )
 
 
-def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig) -> float:
+def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig, device: torch.device) -> float:
     """Seconds for tc.epochs x tc.minibatches plain steps of the same network on the same samples (module docstring)."""
     t, b = ro.rewards.shape[:2]
-    own, edge, mask = (x.reshape(t * b, *x.shape[2:]) for x in (ro.own, ro.edge, ro.mask))
-    act_target, value_target = ro.actions.reshape(t * b, *ro.actions.shape[2:]), ro.values.reshape(t * b, -1)
+    policy.to(device)
+    own, edge, mask = (x.reshape(t * b, *x.shape[2:]).to(device) for x in (ro.own, ro.edge, ro.mask))
+    act_target = ro.actions.reshape(t * b, *ro.actions.shape[2:]).to(device)
+    value_target = ro.values.reshape(t * b, -1).to(device)
     opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
     size = t * b // tc.minibatches
     start = time.perf_counter()
     for _ in range(tc.epochs):
         order = torch.randperm(t * b)
         for k in range(tc.minibatches):
-            mb = order[k * size : (k + 1) * size]
+            mb = order[k * size : (k + 1) * size].to(device)
             mean, value = policy(own[mb], edge[mb], mask[mb])
             loss = ((mean - act_target[mb]) ** 2).mean() + ((value - value_target[mb]) ** 2).mean()
             opt.zero_grad()
             loss.backward()
             opt.step()
-    return time.perf_counter() - start
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    seconds = time.perf_counter() - start
+    policy.cpu()
+    return seconds
 
 
 if __name__ == "__main__":
