@@ -1,13 +1,12 @@
-"""`method=zhu`: distributed formation splitting and merging (Zhu, Juhl, Ferranti and Alonso-Mora, ICRA 2019), in
-2D.
+"""`method=zhu`: distributed formation splitting and merging (Zhu, Juhl, Ferranti and Alonso-Mora, ICRA 2019), 2D.
 
 Every `control_period` (the 5 Hz of Section V-A) each robot grows its obstacle-free convex region P_i within its
 visibility r_B (`convex_region.grow_region`; moving obstacles swept over the horizon tau, Eq. (1)), and each (sub)team
 fits its template formation in its common region P^k = ∩ P_i nearest the global reference p_r (Section III, after
 [20]) and assigns robots to slots (Hungarian method; [20] uses a distributed assignment with the same optimum). Every
 `decision_period` (ff = 1 s) the teams run the consensus steps: communication-loss detection, the split check on the
-intersection graph (Algorithm 1) and merging (Algorithm 2). Stuck faults are checked every step (Section IV-D). A
-proportional controller with the shared collision-avoidance cap tracks the slots (the paper's local planner [22]).
+intersection graph (Algorithm 1) and merging (Algorithm 2). Stuck faults are checked every step (Section IV-D). ORCA
+(controllers/orca.py) makes the step towards each slot collision-free (the paper's local planner is [22]'s MPC).
 
 The robots' computations are identical given the flooded regions (Remark 1), so each team's decision is computed once
 here; the flooding itself is modelled by the connected components of the team's communication graph
@@ -99,25 +98,19 @@ class ZhuConfig:
     between two near-equal formations (each change reshuffles the slots)."""
     gain: float = 1.5
     """Proportional gain (1/s) towards the slot; the speed is capped at the robot's preferred (max) speed."""
-    avoid_distance: float = 0.35
-    """Collision avoidance (controllers.base.limit_approach): surface gap (m) under which approach speed is capped."""
-    avoid_gain: float = 2.0
-    """Allowed approach speed (m/s) per metre of gap left beyond stop_gap."""
+    avoid_distance: float = 0.35  # local_planner=cap (base.limit_approach): gap (m) under which approach is capped
+    avoid_gain: float = 2.0  # local_planner=cap: approach speed (m/s) allowed per metre of gap beyond stop_gap
     stop_gap: float = 0.1
     """The gap (m) at which the approach stops (L&F uses 0.02; at 1.5 m/s and 3 m/s^2 a team that reshuffles its
     slots needs the larger margin: Scenario 2 had 19 contacts per episode with 0.02, 9 with 0.1)."""
     local_planner: str = "orca"
-    """How the robots track their slots (Zhu et al. 2019 Sec. III use the collision-avoiding MPC of [22]): `orca`,
-    reciprocal velocity obstacles (controllers.orca, van den Berg et al. 2011); `cap`, the proportional step with
-    the classical methods' approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28."""
+    """Tracking the slots (Sec. III: [22]'s collision-avoiding MPC): `orca` (controllers.orca), or `cap`: the step
+    with the classical approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28 (docs/zhu.md)."""
     target_gap: float = 0.1
     """Ours: targets of two robots closer than 2 r + target_gap are pushed apart (as STAF's plan does); 0: off."""
-    orca_horizon: float = 1.0
-    """ORCA's time horizon (s): velocities keep every neighbour clear for this long."""
-    orca_margin: float = 0.1
-    """ORCA's clearance (m) added to the robots' and obstacles' radii."""
-    orca_recovery: float = 0.1
-    """Time (s) in which ORCA separates two robots that already touch (one control period of the world)."""
+    orca_horizon: float = 1.0  # s: velocities keep every neighbour clear for this long
+    orca_margin: float = 0.1  # m, added to the robots' and obstacles' radii
+    orca_recovery: float = 0.1  # s in which two robots that touch are separated (the world's control period)
     n_dead: int = 30
     """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
     dp_min: float = 0.15
@@ -432,8 +425,7 @@ class ZhuController(Controller):
                 self.stuck.reset(i)
             self.emit("merge", merged, f"teams {k} and {l}")
 
-    # ---- local formation control (Section III) --------------------------------------------------------------------
-
+    # ---- local formation control (Section III) ---------------------------------------------------------------------
     def _formation_control(self, p: np.ndarray) -> None:
         ref, heading = self.reference()
         at_end = self.s_ref >= self.cum[-1] - 1e-9
