@@ -18,6 +18,8 @@ import numpy as np
 from stafpipe.sensing import Observation
 
 _EPS = 1e-9
+Line = tuple[np.ndarray, np.ndarray]
+"""A half-plane of velocities: (a point on its boundary, the boundary's direction); the left side is allowed."""
 
 
 def _det(a: np.ndarray, b: np.ndarray) -> float:
@@ -56,7 +58,7 @@ def _line(
     return v_own + share * u, direction
 
 
-def _lp1(lines, k: int, max_speed: float, pref: np.ndarray, direction_opt: bool) -> np.ndarray | None:
+def _lp1(lines: list[Line], k: int, max_speed: float, pref: np.ndarray, direction_opt: bool) -> np.ndarray | None:
     """The best velocity on line k within the speed disc and the lines before k (None: there is none)."""
     point, direction = lines[k]
     dot = float(point @ direction)
@@ -87,7 +89,7 @@ def _lp1(lines, k: int, max_speed: float, pref: np.ndarray, direction_opt: bool)
     return point + t * direction
 
 
-def _lp2(lines, max_speed: float, pref: np.ndarray, direction_opt: bool) -> tuple[int, np.ndarray]:
+def _lp2(lines: list[Line], max_speed: float, pref: np.ndarray, direction_opt: bool) -> tuple[int, np.ndarray]:
     """The velocity nearest `pref` (or furthest along it, `direction_opt`) in the speed disc and every half-plane;
     returns (number of lines satisfied, velocity): a count short of len(lines) means infeasible from that line on."""
     if direction_opt:
@@ -105,7 +107,7 @@ def _lp2(lines, max_speed: float, pref: np.ndarray, direction_opt: bool) -> tupl
     return len(lines), result
 
 
-def _lp3(lines, n_fixed: int, start: int, max_speed: float, result: np.ndarray) -> np.ndarray:
+def _lp3(lines: list[Line], n_fixed: int, start: int, max_speed: float, result: np.ndarray) -> np.ndarray:
     """When the half-planes from `start` on leave no velocity: the one that violates them least (the first `n_fixed`,
     static obstacles, stay hard)."""
     distance = 0.0
@@ -151,7 +153,7 @@ def orca_velocities(
     mover_r = np.zeros(0) if mover_radius is None else np.asarray(mover_radius, dtype=float)
     movers = obs.movers[: len(mover_r)]
     for i in range(len(pref)):
-        lines = []
+        lines: list[Line] = []
         gap = float(obs.obstacle_distance[i]) - margin
         if gap < max_speed * horizon:  # the nearest obstacle point: approach it no faster than closes the gap in time
             normal = obs.obstacle[i] / max(float(np.linalg.norm(obs.obstacle[i])), _EPS)

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from stafpipe.report.evidence import Evidence
-from stafpipe.report.verdicts import MISSING, Criterion, Number
+from stafpipe.report.verdicts import Criterion, Number
 
 
 @dataclass(frozen=True)
@@ -41,13 +41,7 @@ class Row:
 def judge(claim: Claim, evidence: Evidence) -> Row:
     """The claim's row: its measurement and the verdict its criterion computes (not measured without its runs)."""
     measured = claim.measure(evidence)
-    verdict = MISSING if math.isnan(measured.ours.value) else measured.criterion.verdict(measured.ours)
-    return Row(claim, measured, verdict)
-
-
-def difference(a: Number, b: Number) -> Number:
-    """a - b with the CIs combined as independent (root of the sum of squares)."""
-    return Number(a.value - b.value, math.hypot(a.half, b.half), min(a.n, b.n) if a.n and b.n else 0, a.unit)
+    return Row(claim, measured, measured.criterion.verdict(measured.ours))
 
 
 def fraction(hits: int, total: int) -> Number:

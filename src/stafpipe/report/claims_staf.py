@@ -10,10 +10,10 @@ from typing import Any
 import pandas as pd
 
 from stafpipe.metrics import CFI_SIGMAS
-from stafpipe.plots.staf_tables import PAPER_TABLE1, mean_ci
+from stafpipe.plots.staf_tables import PAPER_TABLE1
 from stafpipe.report.claims import Claim, Measured, fraction
-from stafpipe.report.evidence import Evidence
-from stafpipe.report.verdicts import Criterion, Number
+from stafpipe.report.evidence import Evidence, column_number, lowest
+from stafpipe.report.verdicts import HOLDS, Criterion, Number
 
 FORMATIONS = ("circle", "wedge", "line")
 NAMES = {"staf": "STAF", "dgnn": "DGNN", "lf": "L&F"}
@@ -29,11 +29,9 @@ def _cfi_note(ev: Evidence, method: str, formation: str) -> str:
     return f"with the printed gap term: {printed.text()}" if not math.isnan(printed.value) else ""
 
 
-def _at_least(
-    column: str, where: dict[str, Any], target: float, slack: float, note: str = ""
-) -> Callable[[Evidence], Measured]:
-    """A measurement: the mean of `column` (in per cent) over the matching episodes, at least `target`."""
-    return lambda ev: Measured(ev.number(column, 100, " %", **where), Criterion("at_least", target, slack), note)
+def _mean(column: str, where: dict[str, Any], criterion: Criterion, note: str = "") -> Callable[[Evidence], Measured]:
+    """A measurement: the mean of `column` (in per cent) over the matching episodes, judged by `criterion`."""
+    return lambda ev: Measured(ev.number(column, 100, " %", **where), criterion, note)
 
 
 def _table1_claims() -> list[Claim]:
@@ -48,12 +46,19 @@ def _table1_claims() -> list[Claim]:
                     f"{NAMES[method]} success rate, {f}",
                     f"{sr:.0f} %",
                     "staf_table1",
-                    _at_least("sr", cell(method, f), sr - 5, 10),
+                    _mean("sr", cell(method, f), Criterion("at_least", sr - 5, 10)),
                 )
             )
         lf_sr = PAPER_TABLE1[("lf", f)][0]
         claims.append(
-            Claim("STAF", "Table 1", f"L&F success rate, {f}", f"{lf_sr:.0f} %", "staf_table1", _near_sr(f, lf_sr))
+            Claim(
+                "STAF",
+                "Table 1",
+                f"L&F success rate, {f}",
+                f"{lf_sr:.0f} %",
+                "staf_table1",
+                _mean("sr", cell("lf", f), Criterion("near", lf_sr, 15)),
+            )
         )
         cfi = PAPER_TABLE1[("staf", f)][2]
         claims.append(
@@ -99,10 +104,6 @@ def _table1_claims() -> list[Claim]:
     return claims
 
 
-def _near_sr(formation: str, paper: float) -> Callable[[Evidence], Measured]:
-    return lambda ev: Measured(ev.number("sr", 100, " %", **cell("lf", formation)), Criterion("near", paper, 15))
-
-
 def _staf_cfi(formation: str, paper: float) -> Callable[[Evidence], Measured]:
     return lambda ev: Measured(
         ev.number("cfi_0.5", 100, " %", **cell("staf", formation)),
@@ -136,7 +137,7 @@ def _staf_cfi_above_both(ev: Evidence) -> Measured:
             if any(math.isnan(x.value) for x in (staf, *others)):
                 continue
             total += 1
-            hits += all(staf.value - staf.half > o.value + o.half for o in others)
+            hits += all(Criterion("above", o.value, target_ci=o.half).verdict(staf) == HOLDS for o in others)
     return Measured(
         Number(hits if total else math.nan, 0, total), Criterion("at_least", 9, 3), "cells above both outside the CIs"
     )
@@ -166,12 +167,9 @@ def _table2_and_fig4() -> list[Claim]:
             rows = ev.select(**cell("staf", f))
             if rows.empty or "sub2_sr" not in rows:
                 return Measured(Number(math.nan), Criterion("at_least", 95, 10))
-            subs = [mean_ci(rows[c]) for c in ("sub1_sr", "sub2_sr")]
-            worst = min(subs, key=lambda mc: mc[0])
+            subs = [column_number(rows, c, 100, " %") for c in ("sub1_sr", "sub2_sr")]
             return Measured(
-                Number(100 * worst[0], 100 * worst[1], len(rows), " %"),
-                Criterion("at_least", 95, 10),
-                f"subteams {100 * subs[0][0]:.1f} / {100 * subs[1][0]:.1f} %",
+                lowest(subs), Criterion("at_least", 95, 10), f"subteams {subs[0].value:.1f} / {subs[1].value:.1f} %"
             )
 
         claims.append(Claim("STAF", "Table 2", f"both subteams succeed, {f}", "100 % each", "staf_table1", both))
@@ -192,13 +190,7 @@ def _loss_terms(ev: Evidence, variant: str, column: str) -> tuple[Number, Number
     if df.empty:
         return Number(math.nan), Number(math.nan)
     raw = df[df["labels"] == "raw"]
-
-    def num(v: str) -> Number:
-        x = raw[raw["variant"] == v][column]
-        mean, ci = mean_ci(x) if len(x) else (math.nan, math.nan)
-        return Number(mean, ci, len(x))
-
-    return num(variant), num("full")
+    return column_number(raw[raw["variant"] == variant], column), column_number(raw[raw["variant"] == "full"], column)
 
 
 def _fig7_claims() -> list[Claim]:
@@ -260,9 +252,7 @@ def _team_size_claims() -> list[Claim]:
         return {**cell("staf", "circle"), "n": n}
 
     def all_sizes(ev: Evidence) -> Measured:
-        srs = [ev.number("sr", 100, " %", **circle(n)) for n in (4, 6, 7, 8)]
-        found = [s for s in srs if not math.isnan(s.value)]
-        worst = min(found, key=lambda s: s.value) if found else Number(math.nan)
+        worst = lowest([ev.number("sr", 100, " %", **circle(n)) for n in (4, 6, 7, 8)])
         return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR over teams of 4, 6, 7, 8")
 
     return [
@@ -272,9 +262,7 @@ def _team_size_claims() -> list[Claim]:
             "CFI of 4 robots at sigma < 0.03",
             "87 %",
             "staf_team_size",
-            lambda ev: Measured(
-                ev.number("cfi_0.01", 100, " %", **circle(4)), Criterion("at_least", 87, 10), "sigma 0.01"
-            ),
+            _mean("cfi_0.01", circle(4), Criterion("at_least", 87, 10), "sigma 0.01"),
         ),
         Claim(
             "STAF",
@@ -282,9 +270,7 @@ def _team_size_claims() -> list[Claim]:
             "CFI of 8 robots at sigma < 0.03",
             "at least 80 %",
             "staf_team_size",
-            lambda ev: Measured(
-                ev.number("cfi_0.01", 100, " %", **circle(8)), Criterion("at_least", 80, 10), "sigma 0.01"
-            ),
+            _mean("cfi_0.01", circle(8), Criterion("at_least", 80, 10), "sigma 0.01"),
         ),
         Claim(
             "STAF", "Fig. 8(a-d)", "teams of 4, 6, 7 and 8 robots pass the corridor", "all", "staf_team_size", all_sizes
@@ -298,10 +284,7 @@ def _study_mean(ev: Evidence, study: str, column: str, **where: Any) -> Number:
         if df.empty or key not in df:
             return Number(math.nan)
         df = df[df[key] == value]
-    if df.empty:
-        return Number(math.nan)
-    mean, ci = mean_ci(df[column])
-    return Number(mean, ci, len(df))
+    return column_number(df, column)
 
 
 def _study(name: str, column: str, criterion: Criterion, **where: Any) -> Callable[[Evidence], Measured]:
@@ -349,9 +332,9 @@ def _levels(ev: Evidence) -> dict[str, dict[str, pd.DataFrame]]:
 
 
 def _beats(b: pd.DataFrame, a: pd.DataFrame, column: str, higher: bool) -> bool:
-    (mb, cb), (ma, ca) = mean_ci(b[column]), mean_ci(a[column])
-    cb, ca = (0.0 if math.isnan(c) else c for c in (cb, ca))
-    return mb - cb > ma + ca if higher else mb + cb < ma - ca
+    """b's mean of `column` above (`higher`) or below a's, outside both CIs."""
+    ours, theirs = column_number(b, column), column_number(a, column)
+    return Criterion("above" if higher else "below", theirs.value, target_ci=theirs.half).verdict(ours) == HOLDS
 
 
 def _learning_claims() -> list[Claim]:
@@ -382,15 +365,8 @@ def _learning_claims() -> list[Claim]:
         rows = rows[
             (rows["method"] == "staf") & rows["label"].str.startswith("b-") & rows["scenario"].str.startswith("gen")
         ]
-        srs = [mean_ci(g["sr"]) for _, g in rows.groupby("scenario")]
-        if not srs:
-            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
-        worst = min(srs)
-        return Measured(
-            Number(100 * worst[0], 100 * worst[1], 0, " %"),
-            Criterion("at_least", 95, 10),
-            f"the lowest of {len(srs)} generated maps",
-        )
+        srs = [column_number(g, "sr", 100, " %") for _, g in rows.groupby("scenario")]
+        return Measured(lowest(srs), Criterion("at_least", 95, 10), f"the lowest of {len(srs)} generated maps")
 
     return [
         Claim(
@@ -422,9 +398,7 @@ def _learning_claims() -> list[Claim]:
 
 def _platform_claims() -> list[Claim]:
     def diff(ev: Evidence) -> Measured:
-        srs = [ev.number("sr", 100, " %", **{**cell("staf", f), "drive": "diff_drive"}) for f in FORMATIONS]
-        found = [s for s in srs if not math.isnan(s.value)]
-        worst = min(found, key=lambda s: s.value) if found else Number(math.nan)
+        worst = lowest([ev.number("sr", 100, " %", **{**cell("staf", f), "drive": "diff_drive"}) for f in FORMATIONS])
         return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR of circle, wedge, line")
 
     def builtin(ev: Evidence) -> Measured:
@@ -435,14 +409,14 @@ def _platform_claims() -> list[Claim]:
         plain = rows["label"].isin(["", "gap-2m", "gap-3m", "long-10m"]) | rows["label"].str.startswith("b-")
         rows = rows[plain & ~rows["scenario"].str.startswith("gen")]
         rows = rows[(rows["scenario"] != "corridor") | rows["label"].isin(["gap-2m", "gap-3m", "long-10m"])]
-        srs = [(mean_ci(g["sr"]), key) for key, g in rows.groupby(["scenario", "label"])]
-        if not srs:
-            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
-        (mean, ci), key = min(srs, key=lambda s: s[0][0])
+        srs = {
+            " ".join(map(str, key)).strip(): column_number(g, "sr", 100, " %")
+            for key, g in rows.groupby(["scenario", "label"])
+        }
+        worst = lowest(list(srs.values()))
+        name = next((k for k, v in srs.items() if v is worst), "")
         return Measured(
-            Number(100 * mean, 100 * ci, 0, " %"),
-            Criterion("at_least", 95, 10),
-            f"the lowest of {len(srs)} built-in maps and variants ({' '.join(map(str, key)).strip()})",
+            worst, Criterion("at_least", 95, 10), f"the lowest of {len(srs)} built-in maps and variants ({name})"
         )
 
     return [

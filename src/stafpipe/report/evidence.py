@@ -49,14 +49,36 @@ class Evidence:
 
     def number(self, column: str, scale: float = 1.0, unit: str = "", **where: Any) -> Number:
         """Mean and 95 % CI of `column` over the selected episodes (NaN when none)."""
-        rows = self.select(**where)
-        if rows.empty or column not in rows:
-            return Number(math.nan)
-        mean, ci = mean_ci(rows[column])
-        return Number(mean * scale, ci * scale, int(rows[column].notna().sum()), unit)
+        return column_number(self.select(**where), column, scale, unit)
 
     def study(self, name: str) -> pd.DataFrame:
         return self.ablations.get(name, pd.DataFrame())
+
+
+def column_number(rows: pd.DataFrame, column: str, scale: float = 1.0, unit: str = "") -> Number:
+    """Mean and 95 % CI of `column` over `rows`, times `scale` (NaN when there is none)."""
+    if rows.empty or column not in rows:
+        return Number(math.nan)
+    mean, ci = mean_ci(rows[column])
+    return Number(mean * scale, ci * scale, int(rows[column].notna().sum()), unit)
+
+
+def lowest(numbers: list[Number]) -> Number:
+    """The lowest of the measured numbers (NaN when none was measured)."""
+    found = [x for x in numbers if not math.isnan(x.value)]
+    return min(found, key=lambda x: x.value) if found else Number(math.nan)
+
+
+def episode_records(rows: pd.DataFrame) -> list[Any]:
+    """The logged episodes (episode_log.EpisodeRecord) behind episode rows, read from their runs' MCAP files."""
+    from stafpipe.episode_log import read_episode
+
+    if rows.empty:
+        return []
+    return [
+        read_episode(Path(str(d)) / "episodes" / f"episode_{int(e):04d}.mcap")
+        for d, e in zip(rows["run_dir"].tolist(), rows["episode"].tolist(), strict=True)
+    ]
 
 
 def _read_table(run_dir: Path, stem: str) -> pd.DataFrame:
