@@ -75,7 +75,7 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
     aim[..., 0] = 0.2  # 0.2 m ahead: the proportional step is 0.4 of top speed (gain 2)
     act = teacher_actions("proportional", aim, obs, 0.2, 1.0, 2.0)
     assert np.allclose(act[..., 0], 0.4) and np.allclose(act[..., 1], 0.0)
-    worlds.pos[0, 0] = [12.0 - 0.2 - 0.05, 6.0]  # robot 0 5 cm in front of the corridor's left wall face (x = 12)
+    worlds.pos[0, 0] = [12.0 - 0.2 - 0.05, 9.0]  # robot 0 5 cm in front of the upper wall block's face (x = 12)
     obs = worlds.observe()
     far = np.zeros_like(obs.position)
     far[..., 0] = 5.0
@@ -83,7 +83,12 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
     free = teacher_actions("proportional", far, obs, 0.2, 1.0, 2.0)
     assert free[0, 0, 0] == pytest.approx(1.0)
     gap = obs.obstacle_distance[0, 0]
+    assert gap == pytest.approx(0.05, abs=1e-6)
     assert capped[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 2.0 * (gap - 0.02) + 1e-9
+    # ORCA's teacher: 5 cm from the wall is inside its 0.1 m margin, so it may not approach the wall at all
+    orca = teacher_actions("orca", far, obs, 0.2, 1.0, 2.0)
+    assert orca[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 1e-6
+    assert np.linalg.norm(orca[0, 0]) <= 1.0 + 1e-9
 
 
 @pytest.mark.slow
@@ -137,6 +142,7 @@ def test_staf_ablation_low_levels_run_and_are_refused_when_unknown(workdir) -> N
             == 0
         )
     assert launch("eval", ["method=staf", "method.low_level=magic", "eval.episodes=1"]) == 2
+    assert launch("eval", ["method=dgnn", "method.low_level=magic", "eval.episodes=1"]) == 2
     assert launch("eval", ["method=staf", "method.plan.adapt=squeeze", "eval.episodes=1"]) == 2
     runs = job_dirs(workdir)
     assert len(runs) == 2

@@ -125,8 +125,9 @@ def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
 
 
 def test_regroup_slides_targets_home_together(divide) -> None:
-    """At the regroup the robots that start home together have targets sliding on straight lines to their goal slots,
-    the same fraction of the way for all, the farthest target moving at the robot's top speed."""
+    """At the regroup the robots that start home together have targets sliding on straight lines to their goal slots
+    (`home_approach=0`; the two-leg way is tested below), the same fraction of the way for all, the farthest target
+    moving at the robot's top speed."""
     sc = _scenario("corridor", "wedge")
     geometry = Geometry(sc)
     ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
@@ -134,7 +135,13 @@ def test_regroup_slides_targets_home_together(divide) -> None:
     pos = place(sc.template(), t.start, math.radians(t.heading_deg))
     goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
     plan = StafPlan(
-        PlanConfig(), sc, sc.template(), goal, centred_path(sc, geometry, ctx.passage_width), ctx.passage_width, divide
+        PlanConfig(home_approach=0.0),
+        sc,
+        sc.template(),
+        goal,
+        centred_path(sc, geometry, ctx.passage_width),
+        ctx.passage_width,
+        divide,
     )
     seen, previous = 0, None
     for _ in range(1500):
@@ -365,7 +372,7 @@ def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir)
 
 
 def test_separated_pushes_close_targets_apart_and_leaves_the_rest() -> None:
-    from stafpipe.controllers.staf_plan import separated
+    from stafpipe.controllers.plan_geometry import separated
 
     pts = np.array([[0.0, 0.0], [0.3, 0.0], [5.0, 5.0], [5.0, 5.6]])
     out = separated(pts, 0.5)
@@ -388,3 +395,30 @@ def test_departure_home_gives_free_slots_to_robots_from_where_their_targets_are(
         plan.targets = goal + [-1.0, 0.0]  # the targets now lie straight before their own slots
         plan._start_home(np.ones(3, dtype=bool), plan.targets)
         assert np.allclose(plan.goal, goal[want]), home
+
+
+def test_home_approach_enters_each_slot_from_straight_behind() -> None:
+    """A target more than `home_approach` behind its slot goes first to the point that far straight behind the slot
+    (along the way in), then straight into the slot; a target closer than that goes straight; all at one fraction,
+    the longest way at top speed."""
+    sc = load_named_scenario("corridor")
+    template = np.array([[0.0, -1.0], [0.0, 0.0], [0.0, 1.0]])
+    goal = template + [26.0, 6.0]
+    path = np.array([[4.0, 6.0], [26.0, 6.0]])
+    plan = StafPlan(PlanConfig(), sc, template, goal, path, 2.4, lambda p, g, m: np.zeros(len(p), int))
+    start = goal + [[-2.0, 0.5], [-0.3, 0.0], [-2.0, -0.5]]
+    plan.targets = start.copy()
+    plan._start_home(np.ones(3, dtype=bool), start)
+    assert np.allclose(plan.goal, goal)  # nearest slots: nobody crosses
+    assert np.allclose(plan.home_via, [[25.4, 5.0], [25.7, 6.0], [25.4, 7.0]])
+    previous, trace = start.copy(), []
+    for _ in range(60):
+        target = plan._home(0.1).copy()
+        assert np.linalg.norm(target - previous, axis=1).max() <= 0.1 * sc.spec.robot.max_speed + 1e-9
+        trace.append(target)
+        previous = target
+    trace_array = np.array(trace)
+    assert np.allclose(trace_array[-1], goal)
+    past_via = trace_array[:, 0, 0] >= 25.4 - 1e-9  # robot 0 on its second leg: level with its slot, straight in
+    assert past_via.any() and np.allclose(trace_array[past_via, 0, 1], 5.0)
+    assert np.allclose(trace_array[:, 1, 1], 6.0)  # robot 1, 0.3 m behind: straight in

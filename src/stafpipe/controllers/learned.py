@@ -22,9 +22,9 @@ from stafpipe.sensing import Observation
 log = logging.getLogger(__name__)
 
 
-PLAN_SAFEGUARDS = ("home", "target_gap")
-"""Plan settings that only keep targets from crossing or crowding (docs/staf.md): a policy trained without them runs
-with them, so they are not compared with its training record."""
+PLAN_SAFEGUARDS = ("home", "target_gap", "home_approach")
+"""Plan settings that only keep targets from crossing, crowding or running into robots already home (docs/staf.md): a
+policy trained without them runs with them, so they are not compared with its training record."""
 
 
 def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stafpipe.formations import assign_slots, formation_slots
+from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_clearance, separated, unit_slots
+from stafpipe.formations import assign_slots
 from stafpipe.geometry import obstacle_distance
 
 
@@ -71,6 +72,11 @@ class PlanConfig:
     """> 0: targets of two robots closer than 2r + target_gap are pushed apart along the line joining them (a
     split or regroup slide can bring them closer than the robots' diameter); 0: off (the shipped policy was trained
     with 0). docs/staf.md."""
+    home_approach: float = 0.6
+    """> 0: after the regroup, a subteam behind the first stops `follow_gap` short of the goal slots already taken,
+    its robots then start for home, and a target more than this far behind its goal slot enters the slot from this
+    far straight behind it (along the way in), so that robots arriving later do not cut past or into robots already
+    seated; 0: as trained (later subteams follow the path to its end). docs/staf.md."""
 
     def check(self, key: str) -> None:
         from stafpipe.errors import require
@@ -84,92 +90,7 @@ class PlanConfig:
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
         require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)
         require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
-
-
-class PathFrame:
-    """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections."""
-
-    def __init__(self, path: np.ndarray) -> None:
-        path = np.asarray(path, float)
-        keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
-        self.path = path[keep] if keep.sum() >= 2 else np.stack([path[0], path[0] + [1e-6, 0.0]])
-        seg = np.diff(self.path, axis=0)
-        self.seg_len = np.linalg.norm(seg, axis=1)
-        self.unit = seg / self.seg_len[:, None]
-        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
-        self.length = float(self.cum[-1])
-
-    def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        """Points (.., 2) and headings (..) at arc lengths s (clipped to the path)."""
-        s = np.clip(np.asarray(s, float), 0.0, self.length)
-        k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg_len) - 1)
-        point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
-        return point, np.arctan2(self.unit[k, 1], self.unit[k, 0])
-
-    def progress(self, points: np.ndarray) -> np.ndarray:
-        """Arc length (P,) of each point's projection on the path."""
-        t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
-        t = np.clip(t, 0.0, self.seg_len)
-        proj = self.path[None, :-1] + t[..., None] * self.unit[None]
-        k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
-        return self.cum[k] + t[np.arange(len(points)), k]
-
-    def lateral(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance (P,) of each point from the path, left positive."""
-        point, heading = self.at(self.progress(points))
-        d = points - point
-        return np.cos(heading) * d[:, 1] - np.sin(heading) * d[:, 0]
-
-
-def _extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
-    """(depth along the heading, width across it) of formation-frame slots, bodies included."""
-    if len(slots) < 2:
-        return 2 * radius, 2 * radius
-    return float(np.ptp(slots[:, 0])) + 2 * radius, float(np.ptp(slots[:, 1])) + 2 * radius
-
-
-def separated(points: np.ndarray, distance: float, rounds: int = 3) -> np.ndarray:
-    """`points` (n, 2) with every pair closer than `distance` pushed apart along its line, half each (a few rounds
-    of pairwise projection; pairs found with a k-d tree, so large teams stay cheap)."""
-    from scipy.spatial import cKDTree
-
-    out = np.array(points, dtype=float)
-    for _ in range(rounds):
-        pairs = cKDTree(out).query_pairs(distance - 1e-9, output_type="ndarray")
-        if len(pairs) == 0:
-            break
-        i, j = pairs[:, 0], pairs[:, 1]
-        d = out[i] - out[j]
-        length = np.linalg.norm(d, axis=1, keepdims=True)
-        unit = np.where(length > 1e-9, d / np.maximum(length, 1e-9), [[1.0, 0.0]])
-        push = 0.5 * (distance - length) * unit
-        np.add.at(out, i, push)
-        np.add.at(out, j, -push)
-    return out
-
-
-def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
-    """Slots of a k-robot formation at spacing 1 (a single robot: the origin)."""
-    return np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
-
-
-def lateral_clearance(
-    points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0, step: float = 0.05
-) -> np.ndarray:
-    """(P,) free distance from each path point to the nearest obstacle straight across the path (the smaller of the
-    left and right sides, up to `reach`): the half-width a formation centred on the path may use. Distance to
-    obstacles ahead or behind does not count (a wall behind the goal does not make the goal area narrow)."""
-    if not scenario.capsules and not scenario.polygons:
-        return np.full(len(points), reach)
-    normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
-    offsets = np.arange(0.0, reach + step, step)
-    out = np.full(len(points), reach)
-    for side in (1.0, -1.0):
-        rays = points[:, None] + side * offsets[None, :, None] * normal[:, None]
-        blocked = obstacle_distance(rays.reshape(-1, 2), scenario).reshape(len(points), len(offsets)) <= 0.0
-        first = np.where(blocked.any(axis=1), offsets[blocked.argmax(axis=1)], reach)
-        out = np.minimum(out, first)
-    return out
+        require(self.home_approach >= 0, f"{key}.home_approach", "must be >= 0", self.home_approach)
 
 
 class StafPlan:
@@ -187,7 +108,7 @@ class StafPlan:
     ) -> None:
         """`divide(pos, goal, m) -> labels` is the high level (so tests and training can pass any partitioner)."""
         spec = scenario.spec
-        self.cfg, self.goal_slots, self.divide = cfg, np.asarray(goal, float), divide
+        self.cfg, self.goal_slots, self.divide, self.scenario = cfg, np.asarray(goal, float), divide, scenario
         self.kind, self.angle = spec.team.formation, spec.team.angle_deg
         self.spacing, self.radius = spec.team.spacing, spec.robot.radius
         self.max_speed = spec.robot.max_speed
@@ -204,7 +125,7 @@ class StafPlan:
         key = ("lateral_clearance", points.tobytes(), heading.tobytes())  # the same path every episode: once
         self.clear = Geometry.of(scenario).remember(key, lambda: lateral_clearance(points, heading, scenario))
         self.full_slots = np.asarray(template, float)
-        _, full_width = _extent(self.full_slots, self.radius)
+        _, full_width = extent(self.full_slots, self.radius)
         narrow = 2 * (self.clear - cfg.margin) < full_width
         self.narrow_start = float(np.argmax(narrow) * self.ds) if narrow.any() else math.inf
         self.narrow_end = float((len(narrow) - 1 - np.argmax(narrow[::-1])) * self.ds) if narrow.any() else -math.inf
@@ -219,7 +140,7 @@ class StafPlan:
         does not fit the free width at the smallest spacing, ramping down over `file_ramp` metres on either side."""
         if not self.cfg.single_file or len(unit) < 2:
             return np.zeros(len(self.clear))
-        smallest = _extent(unit * (2 * self.radius + self.cfg.min_gap), self.radius)[1]
+        smallest = extent(unit * (2 * self.radius + self.cfg.min_gap), self.radius)[1]
         tight = np.flatnonzero(2 * (self.clear - self.cfg.margin) < smallest)
         if not len(tight):
             return np.zeros(len(self.clear))
@@ -253,9 +174,11 @@ class StafPlan:
         self.targets = self.goal.copy()
         # the way home at the regroup: each robot's target slides from where it was to its goal slot
         self.home_from = np.zeros((self.n, 2))
+        self.home_via = np.zeros((self.n, 2))  # the way home: home_from -> home_via -> goal (via = from: straight)
         self.home_frac = np.zeros(self.n)
         self.home_rate = np.zeros(self.n)
         self.homing = np.zeros(self.n, dtype=bool)
+        self.limits: dict[int, float] = {}  # _short_of_taken of the current step, per subteam
         # the way into the subteams at the split: targets slide from where the robots were to their new slots
         self.split_from: np.ndarray | None = None
         self.split_frac, self.split_rate = 1.0, 0.0
@@ -269,6 +192,7 @@ class StafPlan:
         return targets
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
+        self.limits = {}
         if self.regrouped:
             return self._home(dt)
         progress = self.frame.progress(pos)
@@ -290,6 +214,7 @@ class StafPlan:
         self._place()
         self._slide_into_subteams(dt)
         if self.merging:  # robots that are through head for their goal slots; the others still follow their subteam
+            passed = passed | self._stopped_short()
             self._start_home(passed, pos)
             self.labels[passed] = 0
             return self._home(dt)
@@ -313,7 +238,7 @@ class StafPlan:
         last_depth = 0.0
         for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
             unit = unit_slots(self.kind, len(idx), self.angle)
-            depth = _extent(unit * self.spacing, self.radius)[0]
+            depth = extent(unit * self.spacing, self.radius)[0]
             self.file_weights.append(self._file_weights(unit))
             if self.file_weights[-1].any():  # room for the column the subteam becomes in single file
                 depth = max(depth, (len(idx) - 1) * self.spacing + 2 * self.radius)
@@ -384,9 +309,33 @@ class StafPlan:
             waiting = np.flatnonzero(~self.homing)
             self.goal[waiting] = self.goal[waiting][assign_slots(self.targets[waiting], self.goal[waiting])]
         self.home_from[new] = self.targets[new]  # from where each target is now: no target jumps
+        self.home_via[new] = self._approach(self.targets[new], self.goal[new])
         self.home_frac[new] = 0.0
-        self.home_rate[new] = self._top_speed_rate(self.targets[new], self.goal[new])
+        self.home_rate[new] = self.max_speed / max(float(self._home_legs(new)[2].max()), 1e-6)  # as _top_speed_rate
         self.homing |= new
+
+    def _way_in(self) -> np.ndarray:
+        """Unit vector of the way into the goal area: the path's chord over its last 2 m."""
+        end = self.frame.path[-1]
+        chord = end - self.frame.at(max(0.0, self.frame.length - 2.0))[0]
+        return chord / max(float(np.linalg.norm(chord)), 1e-9)
+
+    def _approach(self, start: np.ndarray, slot: np.ndarray) -> np.ndarray:
+        """Via points (k, 2) of targets going home from `start` to `slot`: `home_approach` behind the slot along the
+        way in where the target is further behind than that and the point is free of obstacles; else `start`."""
+        if self.cfg.home_approach <= 0:
+            return start.copy()
+        way = self._way_in()
+        via = slot - self.cfg.home_approach * way
+        behind = (slot - start) @ way > self.cfg.home_approach
+        free = obstacle_distance(via, self.scenario) > self.radius + self.cfg.margin
+        return np.where((behind & free)[:, None], via, start)
+
+    def _home_legs(self, robots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Lengths of the two legs of each way home (from -> via, via -> goal) and their sum, for `robots`."""
+        first = np.linalg.norm(self.home_via[robots] - self.home_from[robots], axis=1)
+        second = np.linalg.norm(self.goal[robots] - self.home_via[robots], axis=1)
+        return first, second, first + second
 
     def _top_speed_rate(self, start: np.ndarray, end: np.ndarray) -> float:
         """Fraction of the way per second for targets sliding from `start` to `end` together (split and regroup
@@ -397,7 +346,13 @@ class StafPlan:
         """Advance the robots on their way home one step; their targets."""
         h = self.homing
         self.home_frac[h] = np.minimum(1.0, self.home_frac[h] + self.home_rate[h] * dt)
-        self.targets[h] = self.home_from[h] + self.home_frac[h, None] * (self.goal[h] - self.home_from[h])
+        first, second, length = self._home_legs(h)
+        along = (self.home_frac[h] * length)[:, None]  # distance covered along the two legs
+        leg1 = self.home_from[h] + along / np.maximum(first, 1e-9)[:, None] * (self.home_via[h] - self.home_from[h])
+        leg2 = self.home_via[h] + (along - first[:, None]) / np.maximum(second, 1e-9)[:, None] * (
+            self.goal[h] - self.home_via[h]
+        )
+        self.targets[h] = np.where(along <= first[:, None], leg1, leg2)
         return self.targets
 
     def _spacing(self, j: int, s: float) -> float:
@@ -405,7 +360,7 @@ class StafPlan:
         to fit the clearance ahead and behind."""
         if self.cfg.adapt == "nominal":
             return self.spacing
-        depth, width = _extent(self.slots[j] * self.spacing, self.radius)
+        depth, width = extent(self.slots[j] * self.spacing, self.radius)
         lo, hi = int(max(0.0, s - depth) / self.ds), int((s + depth + 1.0) / self.ds) + 1
         clear = float(self.clear[lo:hi].min()) if hi > lo and lo < len(self.clear) else math.inf
         unit_width = width - 2 * self.radius
@@ -436,11 +391,47 @@ class StafPlan:
                 ahead_depth = self._depth(j - 1, self._spacing(j - 1, self.anchor[j - 1]))
                 own_depth = self._depth(j, self.spacing)
                 s = min(s, self.anchor[j - 1] - (ahead_depth + own_depth) / 2 - self.cfg.follow_gap)
+            elif j > 0 and self.cfg.home_approach > 0:  # merging: short of the slots taken by robots gone home
+                s = min(s, self._short_of_taken(j))
             self.anchor[j] = min(max(self.anchor[j], s), cap)
+
+    def _short_of_taken(self, j: int) -> float:
+        """The furthest subteam j's anchor may go while merging: its front `follow_gap` behind the nearest goal slot
+        taken by a robot on its way home, where its robots' ways to the free slots are clear (no limit otherwise: on
+        along the path, as trained). Once per step."""
+        if j not in self.limits:
+            self.limits[j] = math.inf
+            if self.homing.any() and self._clear_ways(self.targets[self.order[j]], self.goal[~self.homing]):
+                taken = float(self.frame.progress(self.goal[self.homing]).min()) - self.radius
+                half = self._depth(j, self._spacing(j, self.anchor[j])) / 2
+                self.limits[j] = taken - half - self.cfg.follow_gap
+        return self.limits[j]
+
+    def _clear_ways(self, starts: np.ndarray, slots: np.ndarray) -> bool:
+        """Whether every way home from `starts` to any of `slots` (through its via point) keeps a body clear of the
+        obstacles."""
+        if not len(starts) or not len(slots):
+            return True
+        a = np.repeat(starts, len(slots), axis=0)
+        b = np.tile(slots, (len(starts), 1))
+        via = self._approach(a, b)
+        t = np.linspace(0.0, 1.0, 12)[:, None, None]
+        points = np.concatenate([a + t * (via - a), via + t * (b - via)]).reshape(-1, 2)
+        return bool((obstacle_distance(points, self.scenario) > self.radius + 0.05).all())
+
+    def _stopped_short(self) -> np.ndarray:
+        """(n,) robots of subteams that have come as far as `_short_of_taken` allows: they start for home from there."""
+        out = np.zeros(self.n, dtype=bool)
+        if self.cfg.home_approach <= 0:
+            return out
+        for j in range(1, len(self.order)):
+            if self.hold[j] is None and self.anchor[j] >= self._short_of_taken(j) - 1e-6:
+                out[self.order[j]] = True
+        return out
 
     def _depth(self, j: int, spacing: float) -> float:
         """Depth of subteam j along the path: its formation's, lengthened where it turns into a column."""
-        form = _extent(self.slots[j] * spacing, self.radius)[0]
+        form = extent(self.slots[j] * spacing, self.radius)[0]
         column = (len(self.order[j]) - 1) * self.spacing + 2 * self.radius
         weight = self._file_weight(j)
         return (1 - weight) * form + weight * max(form, column)

@@ -28,7 +28,7 @@ import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
 from stafpipe.controllers.orca import orca_velocities
-from stafpipe.controllers.staf_plan import separated
+from stafpipe.controllers.plan_geometry import separated
 from stafpipe.controllers.zhu_decisions import (
     StuckDetector,
     comm_components,

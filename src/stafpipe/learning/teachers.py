@@ -5,6 +5,9 @@
   staf_net.proportional_step).
 - `avoiding`: the same step, then the classical methods' collision avoidance (controllers/base.py:limit_approach):
   towards a robot or obstacle closer than 0.35 m the approach speed is capped at 2 x (gap - 0.02 m), as in `method=lf`.
+- `orca`: the same step as the preferred velocity of ORCA (controllers/orca.py; van den Berg et al., ISRR 2011) with
+  `method=zhu`'s settings (horizon 1 s, margin 0.1 m, recovery 0.1 s): reciprocal avoidance of every sensed robot and
+  the nearest obstacle point.
 """
 
 from __future__ import annotations
@@ -12,11 +15,13 @@ from __future__ import annotations
 import numpy as np
 
 from stafpipe.controllers.base import limit_approach
+from stafpipe.controllers.orca import orca_velocities
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
-TEACHERS = ("proportional", "avoiding")
+TEACHERS = ("proportional", "avoiding", "orca")
 AVOID_DISTANCE, AVOID_GAIN = 0.35, 2.0  # as method=lf's defaults
+ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = 1.0, 0.1, 0.1  # s, m, s: as method=zhu's defaults
 
 
 def teacher_actions(
@@ -29,5 +34,12 @@ def teacher_actions(
     if kind == "avoiding":
         world = np.stack(
             [limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN) for w in range(len(world))]
+        )
+    elif kind == "orca":
+        world = np.stack(
+            [
+                orca_velocities(world[w], obs.world(w), radius, max_speed, ORCA_HORIZON, ORCA_RECOVERY, ORCA_MARGIN)
+                for w in range(len(world))
+            ]
         )
     return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed

@@ -1,0 +1,95 @@
+"""Geometry the STAF plan works in (controllers/staf_plan.py): a path's arc-length frame, the free width across it,
+formation extents, and targets kept apart."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stafpipe.formations import formation_slots
+from stafpipe.geometry import obstacle_distance
+
+
+class PathFrame:
+    """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections."""
+
+    def __init__(self, path: np.ndarray) -> None:
+        path = np.asarray(path, float)
+        keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
+        self.path = path[keep] if keep.sum() >= 2 else np.stack([path[0], path[0] + [1e-6, 0.0]])
+        seg = np.diff(self.path, axis=0)
+        self.seg_len = np.linalg.norm(seg, axis=1)
+        self.unit = seg / self.seg_len[:, None]
+        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
+        self.length = float(self.cum[-1])
+
+    def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Points (.., 2) and headings (..) at arc lengths s (clipped to the path)."""
+        s = np.clip(np.asarray(s, float), 0.0, self.length)
+        k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg_len) - 1)
+        point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
+        return point, np.arctan2(self.unit[k, 1], self.unit[k, 0])
+
+    def progress(self, points: np.ndarray) -> np.ndarray:
+        """Arc length (P,) of each point's projection on the path."""
+        t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
+        t = np.clip(t, 0.0, self.seg_len)
+        proj = self.path[None, :-1] + t[..., None] * self.unit[None]
+        k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
+        return self.cum[k] + t[np.arange(len(points)), k]
+
+    def lateral(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (P,) of each point from the path, left positive."""
+        point, heading = self.at(self.progress(points))
+        d = points - point
+        return np.cos(heading) * d[:, 1] - np.sin(heading) * d[:, 0]
+
+
+def extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
+    """(depth along the heading, width across it) of formation-frame slots, bodies included."""
+    if len(slots) < 2:
+        return 2 * radius, 2 * radius
+    return float(np.ptp(slots[:, 0])) + 2 * radius, float(np.ptp(slots[:, 1])) + 2 * radius
+
+
+def separated(points: np.ndarray, distance: float, rounds: int = 3) -> np.ndarray:
+    """`points` (n, 2) with every pair closer than `distance` pushed apart along its line, half each (a few rounds
+    of pairwise projection; pairs found with a k-d tree, so large teams stay cheap)."""
+    from scipy.spatial import cKDTree
+
+    out = np.array(points, dtype=float)
+    for _ in range(rounds):
+        pairs = cKDTree(out).query_pairs(distance - 1e-9, output_type="ndarray")
+        if len(pairs) == 0:
+            break
+        i, j = pairs[:, 0], pairs[:, 1]
+        d = out[i] - out[j]
+        length = np.linalg.norm(d, axis=1, keepdims=True)
+        unit = np.where(length > 1e-9, d / np.maximum(length, 1e-9), [[1.0, 0.0]])
+        push = 0.5 * (distance - length) * unit
+        np.add.at(out, i, push)
+        np.add.at(out, j, -push)
+    return out
+
+
+def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
+    """Slots of a k-robot formation at spacing 1 (a single robot: the origin)."""
+    return np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
+
+
+def lateral_clearance(
+    points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0, step: float = 0.05
+) -> np.ndarray:
+    """(P,) free distance from each path point to the nearest obstacle straight across the path (the smaller of the
+    left and right sides, up to `reach`): the half-width a formation centred on the path may use. Distance to
+    obstacles ahead or behind does not count (a wall behind the goal does not make the goal area narrow)."""
+    if not scenario.capsules and not scenario.polygons:
+        return np.full(len(points), reach)
+    normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+    offsets = np.arange(0.0, reach + step, step)
+    out = np.full(len(points), reach)
+    for side in (1.0, -1.0):
+        rays = points[:, None] + side * offsets[None, :, None] * normal[:, None]
+        blocked = obstacle_distance(rays.reshape(-1, 2), scenario).reshape(len(points), len(offsets)) <= 0.0
+        first = np.where(blocked.any(axis=1), offsets[blocked.argmax(axis=1)], reach)
+        out = np.minimum(out, first)
+    return out
