@@ -346,6 +346,9 @@ class StafPlan:
         """Advance the robots on their way home one step; their targets."""
         h = self.homing
         self.home_frac[h] = np.minimum(1.0, self.home_frac[h] + self.home_rate[h] * dt)
+        if self.cfg.home_approach <= 0:  # straight, exactly as trained (the shipped policy's recipe)
+            self.targets[h] = self.home_from[h] + self.home_frac[h, None] * (self.goal[h] - self.home_from[h])
+            return self.targets
         first, second, length = self._home_legs(h)
         along = (self.home_frac[h] * length)[:, None]  # distance covered along the two legs
         leg1 = self.home_from[h] + along / np.maximum(first, 1e-9)[:, None] * (self.home_via[h] - self.home_from[h])
