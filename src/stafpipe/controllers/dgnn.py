@@ -26,22 +26,16 @@ class DGNNConfig:
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
     low_level: str = "learned"
     """`learned` (the trained policy); or the method with its learned part removed (learning/teachers.py):
-    `proportional` (a step towards the robot's guided goal) or `avoiding` (the same with the classical methods'
-    approach cap near robots and obstacles: the teacher of the shipped DGNN's warm start, docs/learning.md)."""
+    `proportional` (a step towards the robot's guided goal), `avoiding` (the same with the classical methods'
+    approach cap near robots and obstacles) or `orca` (the same step as ORCA's preferred velocity: the teacher of the
+    shipped DGNN's warm start, docs/learning.md)."""
     proportional_gain: float = 2.0
-    """low_level proportional or avoiding: the step's gain (1/s)."""
+    """low_level other than learned: the step's gain (1/s)."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.errors import require
-        from stafpipe.learning.teachers import TEACHERS
+        from stafpipe.learning.teachers import check_low_level
 
-        require(
-            self.low_level in ("learned", *TEACHERS),
-            f"{key}.low_level",
-            f"must be one of {['learned', *TEACHERS]}",
-            self.low_level,
-        )
-        require(self.proportional_gain > 0, f"{key}.proportional_gain", "must be > 0", self.proportional_gain)
+        check_low_level(self.low_level, self.proportional_gain, key)
 
     def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
         """With the run's sensing: the policy's features clip what it senses at its own radius."""

@@ -30,24 +30,18 @@ class StafMethodConfig:
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
     low_level: str = "learned"
     """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf.md,
-    `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed) or
-    `avoiding` (the same with the classical methods' approach cap near robots and obstacles; learning/teachers.py)."""
+    `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed),
+    `avoiding` (the same with the classical methods' approach cap near robots and obstacles) or `orca` (the same
+    step as ORCA's preferred velocity); learning/teachers.py."""
     proportional_gain: float = 2.0
-    """low_level proportional or avoiding: the step's gain (1/s)."""
+    """low_level other than learned: the step's gain (1/s)."""
     plan: PlanConfig = field(default_factory=PlanConfig)
     """Subteams, sequencing and regroup; keep the settings the policy was trained with (its `made_by` records them)."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.errors import require
-        from stafpipe.learning.teachers import TEACHERS
+        from stafpipe.learning.teachers import check_low_level
 
-        require(
-            self.low_level in ("learned", *TEACHERS),
-            f"{key}.low_level",
-            f"must be one of {['learned', *TEACHERS]}",
-            self.low_level,
-        )
-        require(self.proportional_gain > 0, f"{key}.proportional_gain", "must be > 0", self.proportional_gain)
+        check_low_level(self.low_level, self.proportional_gain, key)
         self.plan.check(f"{key}.plan")
 
     def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:

@@ -24,6 +24,16 @@ AVOID_DISTANCE, AVOID_GAIN = 0.35, 2.0  # as method=lf's defaults
 ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = 1.0, 0.1, 0.1  # s, m, s: as method=zhu's defaults
 
 
+def check_low_level(low_level: str, gain: float, key: str) -> None:
+    """A learned method's `low_level` (`learned` or a teacher here) and its `proportional_gain`, named under `key`."""
+    from stafpipe.errors import require
+
+    require(
+        low_level in ("learned", *TEACHERS), f"{key}.low_level", f"must be one of {['learned', *TEACHERS]}", low_level
+    )
+    require(gain > 0, f"{key}.proportional_gain", "must be > 0", gain)
+
+
 def teacher_actions(
     kind: str, to_aim: np.ndarray, obs: Observation, radius: float, max_speed: float, gain: float
 ) -> np.ndarray:
