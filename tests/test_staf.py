@@ -36,6 +36,17 @@ def _scenario(name: str, kind: str, n: int | None = None):
     return build_scenario(dataclasses.replace(sc.spec, team=team))
 
 
+def _start_and_plan(sc, divide, plan_cfg: PlanConfig) -> tuple[np.ndarray, StafPlan]:
+    """The team's start positions and a plan for it from its start to its goal along the centred path."""
+    geometry = Geometry(sc)
+    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
+    t = sc.spec.team
+    pos = place(sc.template(), t.start, math.radians(t.heading_deg))
+    goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
+    path = centred_path(sc, geometry, ctx.passage_width)
+    return pos, StafPlan(plan_cfg, sc, sc.template(), goal, path, ctx.passage_width, divide)
+
+
 def _ideal_run(sc, divide, steps: int = 1500, plan_cfg: PlanConfig | None = None):
     """Robots that move straight to their plan targets at the robot's max speed: the plan alone, no policy."""
     geometry = Geometry(sc)
@@ -98,20 +109,8 @@ def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
     """At the split, the subteams behind the first wait where they are, in the formation type with their own robots
     (targets of a perfect k-robot formation at the team's spacing, facing along the path)."""
     sc = _scenario("corridor", kind)
-    geometry = Geometry(sc)
-    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
     t = sc.spec.team
-    pos = place(sc.template(), t.start, math.radians(t.heading_deg))
-    goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
-    plan = StafPlan(
-        PlanConfig(split_distance=100.0),
-        sc,
-        sc.template(),
-        goal,
-        centred_path(sc, geometry, ctx.passage_width),
-        ctx.passage_width,
-        divide,
-    )
+    pos, plan = _start_and_plan(sc, divide, PlanConfig(split_distance=100.0))
     target = plan.step(pos, 0.1)
     assert len(plan.order) > 1
     # the targets slide from the robots into the new slots: no target jumps more than a step at top speed
@@ -129,20 +128,8 @@ def test_regroup_slides_targets_home_together(divide) -> None:
     (`home_approach=0`; the two-leg way is tested below), the same fraction of the way for all, the farthest target
     moving at the robot's top speed."""
     sc = _scenario("corridor", "wedge")
-    geometry = Geometry(sc)
-    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
-    t, v = sc.spec.team, sc.spec.robot.max_speed
-    pos = place(sc.template(), t.start, math.radians(t.heading_deg))
-    goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
-    plan = StafPlan(
-        PlanConfig(home_approach=0.0),
-        sc,
-        sc.template(),
-        goal,
-        centred_path(sc, geometry, ctx.passage_width),
-        ctx.passage_width,
-        divide,
-    )
+    v = sc.spec.robot.max_speed
+    pos, plan = _start_and_plan(sc, divide, PlanConfig(home_approach=0.0))
     seen, previous = 0, None
     for _ in range(1500):
         target = plan.step(pos, 0.1).copy()
