@@ -409,3 +409,16 @@ def test_home_approach_enters_each_slot_from_straight_behind() -> None:
     past_via = trace_array[:, 0, 0] >= 25.4 - 1e-9  # robot 0 on its second leg: level with its slot, straight in
     assert past_via.any() and np.allclose(trace_array[past_via, 0, 1], 5.0)
     assert np.allclose(trace_array[:, 1, 1], 6.0)  # robot 1, 0.3 m behind: straight in
+
+
+def test_a_subteam_starts_home_short_of_taken_slots_only_where_its_ways_are_clear() -> None:
+    """`_clear_ways`: straight through the corridor's opening is clear; a way to a slot behind the upper wall block
+    (x 12-18, y > 7.2) cuts through it."""
+    sc = load_named_scenario("corridor")
+    template = np.array([[0.0, -1.0], [0.0, 0.0], [0.0, 1.0]])
+    path = np.array([[4.0, 6.0], [26.0, 6.0]])
+    plan = StafPlan(
+        PlanConfig(), sc, template, template + [26.0, 6.0], path, 2.4, lambda p, g, m: np.zeros(len(p), int)
+    )
+    assert plan._clear_ways(np.array([[10.0, 6.0]]), np.array([[20.0, 6.0]]))
+    assert not plan._clear_ways(np.array([[10.0, 6.0]]), np.array([[20.0, 6.0], [20.0, 9.0]]))

@@ -24,6 +24,10 @@ from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_cleara
 from stafpipe.formations import assign_slots
 from stafpipe.geometry import obstacle_distance
 
+WAY_CLEARANCE = 0.05
+"""m between a body and the obstacles along every way home before a subteam starts home short of the taken slots
+(`StafPlan._clear_ways`); chosen, not tuned: a little more than the 0.02 m at which the trainer counts a touch."""
+
 
 @dataclass
 class PlanConfig:
@@ -117,6 +121,9 @@ class StafPlan:
         """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are
         alike."""
         self.frame = PathFrame(path)
+        # the way into the goal area (the path's chord over its last 2 m): robots going home enter their slots along it
+        chord = self.frame.path[-1] - self.frame.at(max(0.0, self.frame.length - 2.0))[0]
+        self.way_in = chord / max(float(np.linalg.norm(chord)), 1e-9)
         # free space across the path every 0.1 m: where the full team fits, and how far subteams must shrink
         self.ds = 0.1
         points, heading = self.frame.at(np.arange(0.0, self.frame.length + self.ds, self.ds))
@@ -270,7 +277,7 @@ class StafPlan:
         if self.split_from is None or self.split_frac >= 1.0:
             return
         if self.split_rate == 0.0:
-            self.split_rate = self._top_speed_rate(self.split_from, self.targets)
+            self.split_rate = self._top_speed_rate(np.linalg.norm(self.targets - self.split_from, axis=1))
         self.split_frac = min(1.0, self.split_frac + self.split_rate * dt)
         self.targets = self.split_from + self.split_frac * (self.targets - self.split_from)
 
@@ -311,23 +318,16 @@ class StafPlan:
         self.home_from[new] = self.targets[new]  # from where each target is now: no target jumps
         self.home_via[new] = self._approach(self.targets[new], self.goal[new])
         self.home_frac[new] = 0.0
-        self.home_rate[new] = self.max_speed / max(float(self._home_legs(new)[2].max()), 1e-6)  # as _top_speed_rate
+        self.home_rate[new] = self._top_speed_rate(self._home_legs(new)[2])
         self.homing |= new
-
-    def _way_in(self) -> np.ndarray:
-        """Unit vector of the way into the goal area: the path's chord over its last 2 m."""
-        end = self.frame.path[-1]
-        chord = end - self.frame.at(max(0.0, self.frame.length - 2.0))[0]
-        return chord / max(float(np.linalg.norm(chord)), 1e-9)
 
     def _approach(self, start: np.ndarray, slot: np.ndarray) -> np.ndarray:
         """Via points (k, 2) of targets going home from `start` to `slot`: `home_approach` behind the slot along the
         way in where the target is further behind than that and the point is free of obstacles; else `start`."""
         if self.cfg.home_approach <= 0:
             return start.copy()
-        way = self._way_in()
-        via = slot - self.cfg.home_approach * way
-        behind = (slot - start) @ way > self.cfg.home_approach
+        via = slot - self.cfg.home_approach * self.way_in
+        behind = (slot - start) @ self.way_in > self.cfg.home_approach
         free = obstacle_distance(via, self.scenario) > self.radius + self.cfg.margin
         return np.where((behind & free)[:, None], via, start)
 
@@ -337,10 +337,10 @@ class StafPlan:
         second = np.linalg.norm(self.goal[robots] - self.home_via[robots], axis=1)
         return first, second, first + second
 
-    def _top_speed_rate(self, start: np.ndarray, end: np.ndarray) -> float:
-        """Fraction of the way per second for targets sliding from `start` to `end` together (split and regroup
-        slides): the one with the longest way moves at the robot's top speed."""
-        return self.max_speed / max(float(np.linalg.norm(end - start, axis=1).max()), 1e-6)
+    def _top_speed_rate(self, lengths: np.ndarray) -> float:
+        """Fraction of the way per second for targets sliding together along ways of these lengths (split and
+        regroup slides): the one with the longest way moves at the robot's top speed."""
+        return self.max_speed / max(float(lengths.max()), 1e-6)
 
     def _home(self, dt: float) -> np.ndarray:
         """Advance the robots on their way home one step; their targets."""
@@ -420,7 +420,7 @@ class StafPlan:
         via = self._approach(a, b)
         t = np.linspace(0.0, 1.0, 12)[:, None, None]
         points = np.concatenate([a + t * (via - a), via + t * (b - via)]).reshape(-1, 2)
-        return bool((obstacle_distance(points, self.scenario) > self.radius + 0.05).all())
+        return bool((obstacle_distance(points, self.scenario) > self.radius + WAY_CLEARANCE).all())
 
     def _stopped_short(self) -> np.ndarray:
         """(n,) robots of subteams that have come as far as `_short_of_taken` allows: they start for home from there."""

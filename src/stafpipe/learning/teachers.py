@@ -15,13 +15,16 @@ from __future__ import annotations
 import numpy as np
 
 from stafpipe.controllers.base import limit_approach
+from stafpipe.controllers.lf import LFConfig
 from stafpipe.controllers.orca import orca_velocities
+from stafpipe.controllers.zhu import ZhuConfig
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
 TEACHERS = ("proportional", "avoiding", "orca")
-AVOID_DISTANCE, AVOID_GAIN = 0.35, 2.0  # as method=lf's defaults
-ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = 1.0, 0.1, 0.1  # s, m, s: as method=zhu's defaults
+_LF, _ZHU = LFConfig(), ZhuConfig()  # the teachers avoid as method=lf and method=zhu do by default
+AVOID_DISTANCE, AVOID_GAIN = _LF.avoid_distance, _LF.avoid_gain
+ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = _ZHU.orca_horizon, _ZHU.orca_margin, _ZHU.orca_recovery
 
 
 def check_low_level(low_level: str, gain: float, key: str) -> None:
