@@ -61,7 +61,7 @@ def main() -> None:
         for seed in range(args.episodes):
             controller = ZhuController(ZhuConfig())
             values = run_episode(scenario, geometry, controller, "zhu", seed, WorldConfig(), SensingConfig(radius=3.0))
-            rows.append(controller.episode_stats())
+            rows.append(controller.world_view(0).episode_stats())
             most = max(most, int(values["subteams_max"]))
         table = timing_table(pd.DataFrame(rows))
         print(

@@ -155,7 +155,7 @@ def _events(faults: list[Fault]) -> tuple[list[tuple[str, list[int]]], dict[str,
     values = run_episode(
         scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, world, SensingConfig(radius=3.0)
     )
-    return [(e.kind, e.robots) for e in controller.drain_events() if e.kind != "regions"], values
+    return [(e.kind, e.robots) for e in controller.world_view(0).drain_events() if e.kind != "regions"], values
 
 
 def test_a_stuck_robot_is_flagged_exactly_left_behind_and_merges_back_after_recovering() -> None:
@@ -189,7 +189,7 @@ def test_a_corridor_too_narrow_for_the_square_splits_the_team_and_it_merges_afte
     values = run_episode(
         scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig(radius=3.0)
     )
-    kinds = [e.kind for e in controller.drain_events()]
+    kinds = [e.kind for e in controller.world_view(0).drain_events()]
     assert "split" in kinds and "merge" in kinds[kinds.index("split") :]
     assert values["obstacle_collisions"] == 0
     assert values["sr"] == 1.0
@@ -202,7 +202,7 @@ def test_timings_per_part_are_reported() -> None:
     run_episode(
         scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig(radius=3.0)
     )
-    stats = controller.episode_stats()
+    stats = controller.world_view(0).episode_stats()
     assert stats["time_convex_regions_count"] > 10 and stats["time_convex_regions_mean"] > 0
     assert stats["time_convex_regions_min"] <= stats["time_convex_regions_mean"] <= stats["time_convex_regions_max"]
     assert math.isnan(stats["time_graph_partition_mean"])  # no split in an open lane

@@ -99,14 +99,12 @@ def obstacle_distances(scenario: Scenario, positions: np.ndarray, movers: np.nda
     a, b, r = capsule_arrays(scenario)
     radius = scenario.spec.robot.radius
     mover_r = np.array([m.radius for m in scenario.spec.moving_obstacles])
-    out = np.empty(positions.shape[:2])
-    for k, p in enumerate(positions):
-        cp = closest_points(p, a, b)
-        d = (np.linalg.norm(p[:, None] - cp, axis=-1) - r).min(axis=1)
-        if len(mover_r):
-            d = np.minimum(d, (np.linalg.norm(p[:, None] - movers[k][None], axis=-1) - mover_r).min(axis=1))
-        out[k] = d - radius
-    return out
+    cp = closest_points(positions, a, b)  # (T, n, C, 2), every sample at once
+    d = (np.linalg.norm(positions[:, :, None] - cp, axis=-1) - r).min(axis=-1)
+    if len(mover_r):
+        to_mover = np.linalg.norm(positions[:, :, None] - movers[:, None], axis=-1) - mover_r
+        d = np.minimum(d, to_mover.min(axis=-1))
+    return d - radius
 
 
 def trajectory_from_record(rec: EpisodeRecord, scenario: Scenario) -> Trajectory:
@@ -136,62 +134,109 @@ def run_episode(
     log_path: Path | None = None,
 ) -> dict[str, float]:
     """Run one episode; log it to `log_path` (MCAP) if given; return its metrics."""
-    ctx, path = episode_context(scenario, geometry, sensing, goal_tolerance, cfi_margin)
-    worlds = Worlds([scenario], sensing, world_cfg)
-    obs = worlds.reset([seed]).world(0)
-    controller.reset(
-        TeamInfo(scenario, obs.position.copy(), worlds.goal[0].copy(), scenario.template(), path, ctx.passage_width)
-    )
-    log = EpisodeLogWriter(log_path) if log_path else None
-    if log:
-        log.info(method, seed, scenario_yaml(scenario), asdict(ctx), worlds.goal[0])
-    times, pos, vel, sub, movers, collisions = [], [], [], [], [], []
+    return run_episodes(
+        scenario, geometry, controller, method, [seed], world_cfg, sensing, goal_tolerance, cfi_margin, [log_path]
+    )[0]
 
-    def record(step: int) -> None:
-        times.append(float(worlds.time[0]))
-        pos.append(worlds.pos[0].copy())
-        vel.append(worlds.vel[0].copy())
-        sub.append(controller.subteams.copy())
-        movers.append(worlds.mover_positions(0))
-        if log:
-            log.state(times[-1], pos[-1], vel[-1], worlds.heading[0], controller.targets, sub[-1], movers[-1])
+
+class _Recorder:
+    """What one world of a batch records while its episode runs, and its MCAP log if it has one."""
+
+    def __init__(self, log_path: Path | None) -> None:
+        self.log = EpisodeLogWriter(log_path) if log_path else None
+        self.times: list[float] = []
+        self.pos: list[np.ndarray] = []
+        self.vel: list[np.ndarray] = []
+        self.sub: list[np.ndarray] = []
+        self.movers: list[np.ndarray] = []
+        self.collisions: list[tuple[int, int, int]] = []
+
+    def record(self, worlds: Worlds, w: int, controller: Controller, step: int) -> None:
+        self.times.append(float(worlds.time[w]))
+        self.pos.append(worlds.pos[w].copy())
+        self.vel.append(worlds.vel[w].copy())
+        self.sub.append(controller.subteams.copy())
+        self.movers.append(worlds.mover_positions(w))
+        if self.log:
+            self.log.state(
+                self.times[-1], self.pos[-1], self.vel[-1], worlds.heading[w], controller.targets, self.sub[-1],
+                self.movers[-1],
+            )  # fmt: skip
             for e in controller.drain_events():
-                log.event(times[-1], step, e.kind, e.robots, e.detail)
+                self.log.event(self.times[-1], step, e.kind, e.robots, e.detail)
+            for kind, fault in worlds.fault_events:
+                robots = [fault.robot] if fault.kind in ROBOT_FAULTS else []
+                self.log.event(self.times[-1], step, kind, robots, fault.describe())
 
-    def log_faults(step: int) -> None:
-        if log is None:
-            return
-        for kind, fault in worlds.fault_events:
-            log.event(times[-1], step, kind, [fault.robot] if fault.kind in ROBOT_FAULTS else [], fault.describe())
+    def collided(self, step: int, a: int, b: int) -> None:
+        self.collisions.append((step, a, b))
+        if self.log:
+            self.log.event(self.times[-1], step, "collision", [a, b])
 
-    record(0)
-    log_faults(0)
+    def trajectory(self, scenario: Scenario, goal: np.ndarray) -> Trajectory:
+        p = np.stack(self.pos)
+        return Trajectory(
+            np.array(self.times),
+            p,
+            np.stack(self.vel),
+            np.stack(self.sub),
+            goal,
+            obstacle_distances(scenario, p, np.stack(self.movers)),
+            self.collisions,
+        )
+
+
+def run_episodes(
+    scenario: Scenario,
+    geometry: Geometry,
+    controller: Controller,
+    method: str,
+    seeds: list[int],
+    world_cfg: WorldConfig,
+    sensing: SensingConfig,
+    goal_tolerance: float = 0.3,
+    cfi_margin: float = 0.1,
+    log_paths: list[Path | None] | None = None,
+) -> list[dict[str, float]]:
+    """Run one episode per seed at once, in parallel worlds of one batch (world w seeded seeds[w]); log world w to
+    `log_paths[w]` (MCAP) if given; return each episode's metrics. Each episode ends when its robots are home (or at
+    the time limit); a finished world is no longer asked for actions nor recorded, and cannot touch the others (each
+    world has its own space and random streams), so an episode's result does not depend on the batch it ran in."""
+    ctx, path = episode_context(scenario, geometry, sensing, goal_tolerance, cfi_margin)
+    worlds = Worlds([scenario] * len(seeds), sensing, world_cfg)
+    obs = worlds.reset(list(seeds))
+    template = scenario.template()
+    controller.reset_worlds(
+        [
+            TeamInfo(scenario, obs.position[w].copy(), worlds.goal[w].copy(), template, path, ctx.passage_width)
+            for w in range(len(seeds))
+        ]
+    )
+    recorders = [_Recorder(p) for p in (log_paths or [None] * len(seeds))]
+    text = scenario_yaml(scenario) if any(rec.log for rec in recorders) else ""
+    for w, (rec, seed) in enumerate(zip(recorders, seeds, strict=True)):
+        if rec.log:
+            rec.log.info(method, seed, text, asdict(ctx), worlds.goal[w])
+        rec.record(worlds, w, controller.world_view(w), 0)
+    active = np.ones(len(seeds), dtype=bool)
     steps = int(round(scenario.spec.time_limit / world_cfg.control_dt))
     for step in range(1, steps + 1):
-        actions = controller.act(obs)
-        obs_b, events = worlds.step(actions[None])
-        obs = obs_b.world(0)
-        record(step)
-        log_faults(step)
-        for c in events[0]:
-            collisions.append((step, c.a, c.b))
-            if log:
-                log.event(times[-1], step, "collision", [c.a, c.b])
-        if matched_goal_distance(worlds.pos[0], worlds.goal[0]).max() <= goal_tolerance:
+        actions = controller.act_worlds(obs, active)
+        obs, events = worlds.step(actions)
+        for w in np.flatnonzero(active).tolist():
+            rec = recorders[w]
+            rec.record(worlds, w, controller.world_view(w), step)
+            for c in events[w]:
+                rec.collided(step, c.a, c.b)
+            if matched_goal_distance(worlds.pos[w], worlds.goal[w]).max() <= goal_tolerance:
+                active[w] = False
+        if not active.any():
             break
-    p = np.stack(pos)
-    mv = np.stack(movers)
-    traj = Trajectory(
-        np.array(times),
-        p,
-        np.stack(vel),
-        np.stack(sub),
-        worlds.goal[0].copy(),
-        obstacle_distances(scenario, p, mv),
-        collisions,
-    )
-    values = episode_metrics(traj, ctx)
-    if log:
-        log.metrics(times[-1], values)
-        log.close()
-    return values
+    results = []
+    for w, rec in enumerate(recorders):
+        values = episode_metrics(rec.trajectory(scenario, worlds.goal[w].copy()), ctx)
+        if rec.log:
+            rec.log.metrics(rec.times[-1], values)
+            rec.log.close()
+        results.append(values)
+    return results

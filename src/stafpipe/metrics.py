@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
-from stafpipe.integrity import formation_integrity
+from stafpipe.integrity import formation_integrities
 
 CFI_SIGMAS = (0.5, 0.1, 0.01)  # STAF Table 1 columns
 CFI_WEIGHT = 0.5  # STAF Appendix D: w = 0.5
@@ -107,36 +107,42 @@ def travel_time_of_arrivals(traj: Trajectory, ctx: MetricContext) -> float:
     return float(traj.time[done[0]])
 
 
-def _heading(vel: np.ndarray, default: float) -> float:
-    v = vel.mean(axis=0)
-    return math.atan2(v[1], v[0]) if np.linalg.norm(v) > 0.05 else default
-
-
 def _group_terms(
-    traj: Trajectory, ctx: MetricContext, k: int, idx: np.ndarray, memo: dict | None = None
-) -> tuple[float, float]:
-    """(diameter 2r, epsilon) of the robots `idx` at sample k; `memo` shares them between the team's CFI and the
-    subteams' (Table 2), which judge the same groups at the same samples."""
-    key = (k, idx.tobytes())
-    if memo is not None and key in memo:
-        return memo[key]
-    p = traj.positions[k, idx]
-    diam = 2.0 * (float(np.linalg.norm(p - p.mean(axis=0), axis=1).max()) + ctx.robot_radius)
-    heading = _heading(traj.velocities[k, idx], math.radians(ctx.heading_deg))
-    terms = diam, formation_integrity(p, ctx.formation, ctx.spacing, heading, ctx.angle_deg)
-    if memo is not None:
-        memo[key] = terms
-    return terms
+    traj: Trajectory, ctx: MetricContext, ks: np.ndarray, idx: np.ndarray, memo: dict | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(diameter 2r, epsilon) of the robots `idx` at each sample of `ks`, vectorised over the samples; `memo` shares
+    them between the team's CFI and the subteams' (Table 2), which judge the same groups at the same samples."""
+    memo = {} if memo is None else memo
+    group = idx.tobytes()
+    todo = np.array([k for k in ks if (k, group) not in memo], dtype=int)
+    if len(todo):
+        p = traj.positions[todo][:, idx]  # (K, k, 2)
+        diam = 2.0 * (np.linalg.norm(p - p.mean(axis=1, keepdims=True), axis=-1).max(axis=1) + ctx.robot_radius)
+        v = traj.velocities[todo][:, idx].mean(axis=1)  # the group faces where it moves, if it moves at all
+        moving = np.linalg.norm(v, axis=-1) > 0.05
+        heading = np.where(moving, np.arctan2(v[:, 1], v[:, 0]), math.radians(ctx.heading_deg))
+        eps = formation_integrities(p, ctx.formation, ctx.spacing, heading, ctx.angle_deg)
+        for k, d, e in zip(todo, diam, eps, strict=True):
+            memo[(k, group)] = (float(d), float(e))
+    terms = [memo[(k, group)] for k in ks]
+    return np.array([d for d, _ in terms]), np.array([e for _, e in terms])
 
 
 def cfi_terms(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per (sample, subteam): the team's diameter 2 r (r = max distance of a robot's edge from the subteam's centroid)
-    and its integrity epsilon. Returns flat arrays (diameter, epsilon)."""
-    terms = [
-        _group_terms(traj, ctx, k, np.flatnonzero(traj.subteams[k] == team), memo)
+    and its integrity epsilon. Returns flat arrays (diameter, epsilon), samples in order, subteams by id within one."""
+    memo = {} if memo is None else memo
+    entries = [
+        (k, np.flatnonzero(traj.subteams[k] == team))
         for k in range(len(traj.time))
         for team in np.unique(traj.subteams[k])
     ]
+    groups: dict[bytes, tuple[np.ndarray, list[int]]] = {}
+    for k, idx in entries:
+        groups.setdefault(idx.tobytes(), (idx, []))[1].append(k)
+    for idx, ks in groups.values():  # each group of robots over all the samples it stands as a subteam
+        _group_terms(traj, ctx, np.array(ks), idx, memo)
+    terms = [memo[(k, idx.tobytes())] for k, idx in entries]
     return np.array([d for d, _ in terms]), np.array([e for _, e in terms])
 
 
@@ -160,8 +166,7 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext, memo: dict | None = No
         done = np.flatnonzero((matched[:, idx] <= ctx.goal_tolerance).all(axis=1))
         out[f"sub{j + 1}_sr"] = float(np.mean((matched[-1, idx] <= ctx.goal_tolerance) & ~hit[idx]))
         out[f"sub{j + 1}_tt"] = float(traj.time[done[0]]) if len(done) else math.nan
-        terms = [_group_terms(traj, ctx, k, idx, memo) for k in split]
-        diam, eps = np.array([d for d, _ in terms]), np.array([e for _, e in terms])
+        diam, eps = _group_terms(traj, ctx, np.array(split), idx, memo)
         for sigma in CFI_SIGMAS:
             out[f"sub{j + 1}_cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
     return out
@@ -195,18 +200,19 @@ def connectivity(positions: np.ndarray, radius: float, occlusion_radius: float =
     graph is that of sensed neighbours, as Cezayirli Fig. 4 counts them."""
     from stafpipe.sensing import occluded
 
-    links, lam2 = [], []
-    for p in positions:
-        rel = p[None] - p[:, None]
-        d = np.linalg.norm(rel, axis=-1)
-        adj = (d <= radius) & ~np.eye(len(p), dtype=bool)
-        if occlusion_radius > 0:
-            hidden = occluded(rel, d, occlusion_radius)
-            adj &= ~hidden & ~hidden.T
-        links.append(int(adj.sum() // 2))
-        lap = np.diag(adj.sum(axis=1)) - adj.astype(float)
-        lam2.append(max(0.0, float(np.sort(np.linalg.eigvalsh(lap))[1])) if len(p) > 1 else 0.0)
-    return np.array(links), np.array(lam2)
+    rel = positions[:, None] - positions[:, :, None]  # (T, n, n, 2): [t, i, j] = p_j - p_i
+    d = np.linalg.norm(rel, axis=-1)
+    n = positions.shape[1]
+    adj = (d <= radius) & ~np.eye(n, dtype=bool)
+    if occlusion_radius > 0:
+        hidden = occluded(rel, d, occlusion_radius)
+        adj &= ~hidden & ~np.swapaxes(hidden, -1, -2)
+    links = adj.sum(axis=(1, 2)) // 2
+    if n < 2:
+        return links, np.zeros(len(positions))
+    degree = adj.sum(axis=2)
+    lap = degree[:, :, None] * np.eye(n) - adj.astype(float)  # every sample's graph Laplacian at once
+    return links, np.maximum(0.0, np.sort(np.linalg.eigvalsh(lap), axis=-1)[:, 1])
 
 
 def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:

@@ -113,9 +113,13 @@ class EvalConfig:
     label: str = ""
     """Free text written into every results row (column `label`): tells variants of one method apart in
     `stafpipe plot table` (e.g. the `staf_levels` ablation)."""
+    batch: int = 0
+    """Episodes run at once, in parallel worlds of one batched world (one network call per step for all of them in
+    a learned method); 0: all of them up to `AUTO_BATCH`. An episode's result does not depend on this (a test)."""
 
     def check(self, key: str = "eval") -> None:
         require(self.episodes >= 1, f"{key}.episodes", "must be >= 1", self.episodes)
+        require(self.batch >= 0, f"{key}.batch", "must be >= 0 (0: automatic)", self.batch)
         require(self.goal_tolerance > 0, f"{key}.goal_tolerance", "must be > 0", self.goal_tolerance)
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 

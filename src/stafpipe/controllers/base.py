@@ -1,11 +1,15 @@
 """The one controller interface every method implements (straight, lf, zhu, cezayirli, dgnn, staf).
 
-Evaluation, metrics and logging never special-case a method: they call `reset`, then `act` once per control step, and
-read `subteams`, `targets` and the drained `events`.
+Evaluation, metrics and logging never special-case a method: they call `reset_worlds` with one team per world of a
+batch, then `act_worlds` once per control step on the batch's (B, n, ...) observations, and read each world's
+`subteams`, `targets`, drained `events` and `episode_stats` through `world_view(w)`. A method written for one world
+implements `reset` and `act`; the base class runs one copy of it per world. A method that gains from the batch (the
+learned ones: one network call for every world) overrides the three batch methods.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,6 +52,8 @@ class Controller:
     _subteams: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     _targets: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     _events: list[Event] = field(default_factory=list)
+    _worlds: list[Controller] = field(default_factory=list)
+    """One copy per world of the batch (`reset_worlds`)."""
 
     def reset(self, team: TeamInfo) -> None:
         """Start an episode."""
@@ -83,6 +89,27 @@ class Controller:
         out, self._events = self._events, []
         return out
 
+    def reset_worlds(self, teams: list[TeamInfo]) -> None:
+        """Start an episode in each of B worlds (one team each). By default one copy of this controller per world,
+        each reset as `reset` would."""
+        template = copy.copy(self)
+        template._worlds = []  # the copies do not nest the batch
+        self._worlds = [copy.deepcopy(template) for _ in teams]
+        for controller, team in zip(self._worlds, teams, strict=True):
+            controller.reset(team)
+
+    def act_worlds(self, obs: Observation, active: np.ndarray) -> np.ndarray:
+        """Commanded planar velocities (B, n, 2) for a batch's observations; worlds whose `active` entry is false (their
+        episode is over) get zeros and are not asked."""
+        out = np.zeros(obs.position.shape)
+        for w in np.flatnonzero(active).tolist():
+            out[w] = self._worlds[w].act(obs.world(w))
+        return out
+
+    def world_view(self, w: int) -> Controller:
+        """What the controller of world w reports: `subteams`, `targets`, `drain_events()`, `episode_stats()`."""
+        return self._worlds[w]
+
 
 def limit_approach(
     v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float, stop_gap: float = 0.02
@@ -95,14 +122,19 @@ def limit_approach(
     dist = np.linalg.norm(rel, axis=-1)
     gaps = dist - 2 * radius
     close = obs.neighbours & (gaps < avoid_distance)
+    near_wall = obs.obstacle_distance < avoid_distance
+    rows = np.flatnonzero(close.any(axis=1) | near_wall)  # only these robots have anything to slide along
+    if not len(rows):
+        return v
+    unit = rel / np.maximum(dist, 1e-9)[..., None]
     o_dir = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
-    for i in range(len(v)):
-        normals = [rel[i, j] / max(dist[i, j], 1e-9) for j in np.flatnonzero(close[i])]
-        limits = [gaps[i, j] for j in np.flatnonzero(close[i])]
-        if obs.obstacle_distance[i] < avoid_distance:
+    for i in rows:
+        js = np.flatnonzero(close[i])
+        normals, limits = list(unit[i, js]), list(gaps[i, js])
+        if near_wall[i]:
             normals.append(o_dir[i])
             limits.append(obs.obstacle_distance[i])
-        for n_vec, gap in zip(normals, limits, strict=True):
+        for n_vec, gap in zip(normals, limits, strict=True):  # in this order: robots by index, then the wall
             excess = float(v[i] @ n_vec) - avoid_gain * (gap - stop_gap)
             if excess > 0:
                 v[i] -= excess * n_vec

@@ -1,16 +1,18 @@
 """The evaluation controller of every learned method: its policy checkpoint driven through the method's adapter
-(learning/adapters.py), exactly as the PPO rollout drives it, one world at a time."""
+(learning/adapters.py), exactly as the PPO rollout drives it, on a batch of worlds: one network call per step for every
+world of the batch."""
 
 from __future__ import annotations
 
 import dataclasses
 import logging
+import zlib
 from typing import Any
 
 import numpy as np
 import torch
 
-from stafpipe.controllers.base import Controller, TeamInfo
+from stafpipe.controllers.base import Controller, Event, TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import load_policy
@@ -70,36 +72,66 @@ class LearnedController(Controller):
         self.adapter = ADAPTERS[cfg.name](
             self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
         )
-        self.generator = torch.Generator().manual_seed(0)
-        # One thread: a parallel matrix product sums in another order, and a closed loop grows the last bit into
-        # another trajectory (measured: DGNN's corridor wedge, 1 vs 2 threads, other TT in 4 of 5 episodes). With
-        # one thread the seed fixes the episode on any number of cores; these networks are no slower with it.
         torch.set_num_threads(1)
         self.max_speed = 1.0
         self.last_time = 0.0
 
     def reset(self, team: TeamInfo) -> None:
-        super().reset(team)
-        self.max_speed = team.scenario.spec.robot.max_speed
-        self.adapter.begin([team])
-        self.last_time = 0.0
+        self.reset_worlds([team])
 
     def act(self, obs: Observation) -> np.ndarray:
-        dt, self.last_time = float(obs.time) - self.last_time, float(obs.time)
-        batch = Observation(*(np.asarray(x)[None] for x in obs))  # a batch of one world, as the adapter takes
-        f, _, targets = self.adapter.step(batch, dt)
-        self._targets = targets[0].copy()
-        self._subteams = self.adapter.subteams()[0].copy()
-        for kind, robots, detail in self.adapter.drain_events(0):
-            self.emit(kind, robots, detail)
+        batch = Observation(*(np.asarray(x)[None] for x in obs))  # a batch of one world
+        return self.act_worlds(batch, np.ones(1, dtype=bool))[0]
+
+    @property
+    def subteams(self) -> np.ndarray:
+        return self._worlds[0].subteams
+
+    @property
+    def targets(self) -> np.ndarray:
+        return self._worlds[0].targets
+
+    def drain_events(self) -> list[Event]:
+        return self._worlds[0].drain_events()
+
+    def reset_worlds(self, teams: list[TeamInfo]) -> None:
+        """Every world's episode in the one adapter, so that each step is one network call for the batch."""
+        self.n = len(teams[0].start)
+        self.max_speed = teams[0].scenario.spec.robot.max_speed
+        self.adapter.begin(teams)
+        self.last_time = 0.0
+        self._worlds = [Controller() for _ in teams]  # each world's subteams, targets and events
+        for view, team in zip(self._worlds, teams, strict=True):
+            Controller.reset(view, team)
+        # Sampled actions (deterministic=false): one noise stream per world, seeded by its start, so that a world's
+        # episode does not depend on the batch it ran in nor on the episodes before it.
+        self.generators = [torch.Generator().manual_seed(zlib.crc32(t.start.tobytes())) for t in teams]
+
+    def act_worlds(self, obs: Observation, active: np.ndarray) -> np.ndarray:
+        time = float(obs.time[0])  # the worlds of a batch share one clock
+        dt, self.last_time = time - self.last_time, time
+        f, _, targets = self.adapter.step(obs, dt)
+        subteams = self.adapter.subteams()
+        for w in np.flatnonzero(active).tolist():
+            view = self._worlds[w]
+            view._targets, view._subteams = targets[w].copy(), subteams[w].copy()
+            for kind, robots, detail in self.adapter.drain_events(w):
+                view.emit(kind, robots, detail)
         if self.teacher != "learned":
             radius = self.adapter.teams[0].scenario.spec.robot.radius
-            mean = teacher_actions(
-                self.teacher, targets - batch.position, batch, radius, self.max_speed, self.cfg.proportional_gain
+            action = teacher_actions(
+                self.teacher, targets - obs.position, obs, radius, self.max_speed, self.cfg.proportional_gain
             )
-            return commands(mean[0], obs.heading, self.max_speed)
-        with torch.inference_mode():  # execution: no critic, no autograd bookkeeping
-            action = self.policy.act(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
-            if not self.cfg.deterministic:
-                action = action + self.policy.log_std.exp() * torch.randn(action.shape, generator=self.generator)
-        return commands(action[0].numpy(), obs.heading, self.max_speed)
+        else:
+            with torch.inference_mode():  # execution: no critic, no autograd bookkeeping
+                mean = self.policy.act(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
+                if not self.cfg.deterministic:
+                    std = self.policy.log_std.exp()
+                    mean = mean + torch.stack([std * torch.randn(mean.shape[1:], generator=g) for g in self.generators])
+            action = mean.numpy()
+        out = commands(action, obs.heading, self.max_speed)
+        out[~active] = 0.0
+        return out
+
+    def world_view(self, w: int) -> Controller:
+        return self._worlds[w]

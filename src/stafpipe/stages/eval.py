@@ -19,7 +19,7 @@ from scipy import stats
 
 from stafpipe.config.schema import EvalConfig, FormationConfig, RobotConfig
 from stafpipe.controllers import make_controller
-from stafpipe.episode import run_episode
+from stafpipe.episode import run_episodes
 from stafpipe.geometry import Geometry
 from stafpipe.io import write_table
 from stafpipe.progress import progress
@@ -30,6 +30,8 @@ from stafpipe.world import WorldConfig
 
 log = logging.getLogger(__name__)
 SEED_STRIDE = 100_003
+AUTO_BATCH = 50
+"""`eval.batch=0`: episodes run at once (benchmarks/eval_batch_time.py measured the speed-up levelling off by here)."""
 
 
 def episode_seed(seed: int, k: int) -> int:
@@ -87,39 +89,34 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     sensing = section(cfg.sensing, SensingConfig)
     method_cfg: Any = OmegaConf.to_object(cfg.method)
     geometry = Geometry.of(scenario)
+    controller = make_controller(method_cfg)  # once: a learned method loads its checkpoints here
+    size = ev.batch or AUTO_BATCH
     rows, outputs = [], []
-    for k in progress(range(ev.episodes), desc=f"eval {method_cfg.name} on {scenario.name}", unit="episode"):
-        seed = episode_seed(int(cfg.seed), k)
-        log_path = out_dir / "episodes" / f"episode_{k:04d}.mcap" if ev.log_episodes else None
-        controller = make_controller(method_cfg)
-        values = run_episode(
-            scenario,
-            geometry,
-            controller,
-            method_cfg.name,
-            seed,
-            world_cfg,
-            sensing,
-            ev.goal_tolerance,
-            ev.cfi_margin,
-            log_path,
-        )
-        rows.append(
-            {
-                "episode": k,
-                "seed": seed,
-                "method": method_cfg.name,
-                "label": ev.label,
-                "scenario": scenario.name,
-                "formation": scenario.spec.team.formation,
-                "n": scenario.spec.team.n,
-                "drive": scenario.spec.robot.drive,
-                **values,
-                **controller.episode_stats(),
-            }
-        )
-        if log_path:
-            outputs.append(log_path)
+    batches = [list(range(first, min(first + size, ev.episodes))) for first in range(0, ev.episodes, size)]
+    desc = f"eval {method_cfg.name} on {scenario.name} ({ev.episodes} episodes in batches of <= {size})"
+    for ks in progress(batches, desc=desc, unit="batch"):
+        seeds = [episode_seed(int(cfg.seed), k) for k in ks]
+        logs = [out_dir / "episodes" / f"episode_{k:04d}.mcap" if ev.log_episodes else None for k in ks]
+        results = run_episodes(
+            scenario, geometry, controller, method_cfg.name, seeds, world_cfg, sensing, ev.goal_tolerance,
+            ev.cfi_margin, logs,
+        )  # fmt: skip
+        for w, (k, seed, values) in enumerate(zip(ks, seeds, results, strict=True)):
+            rows.append(
+                {
+                    "episode": k,
+                    "seed": seed,
+                    "method": method_cfg.name,
+                    "label": ev.label,
+                    "scenario": scenario.name,
+                    "formation": scenario.spec.team.formation,
+                    "n": scenario.spec.team.n,
+                    "drive": scenario.spec.robot.drive,
+                    **values,
+                    **controller.world_view(w).episode_stats(),
+                }
+            )
+        outputs += [p for p in logs if p]
     df = pd.DataFrame(rows)
     summary = summarise(df)
     outputs += write_table(df, out_dir / "results") + write_table(summary, out_dir / "summary")
