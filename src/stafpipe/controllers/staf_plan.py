@@ -17,10 +17,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import permutations
 
 import numpy as np
 
-from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_clearance, separated, unit_slots
+from stafpipe.controllers.plan_geometry import (
+    PathFrame,
+    blocked_ways,
+    extent,
+    lateral_clearance,
+    separated,
+    unit_slots,
+)
 from stafpipe.formations import assign_slots
 from stafpipe.geometry import obstacle_distance
 
@@ -81,6 +89,10 @@ class PlanConfig:
     its robots then start for home, and a target more than this far behind its goal slot enters the slot from this
     far straight behind it (along the way in), so that robots arriving later do not cut past or into robots already
     seated; 0: as trained (later subteams follow the path to its end). docs/staf.md."""
+    unblock: bool = True
+    """At the split, if a robot of a waiting subteam stands in the lane ahead of a robot of a subteam that goes
+    before it (`plan_geometry.blocked_ways`), the subteams go in the order with the fewest such robots (ties: the
+    usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""
 
     def check(self, key: str) -> None:
         from stafpipe.errors import require
@@ -238,8 +250,10 @@ class StafPlan:
             labels = balance_sizes(labels, pos, self.m_wanted)
         teams = [np.flatnonzero(labels == j) for j in np.unique(labels)]
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
-        lateral = np.abs(self.frame.lateral(pos))
-        teams.sort(key=lambda idx: -(progress[idx].mean() - lateral[idx].mean()))
+        lateral = self.frame.lateral(pos)
+        teams.sort(key=lambda idx: -(progress[idx].mean() - np.abs(lateral[idx]).mean()))
+        if self.cfg.unblock and blocked_ways(progress, lateral, teams, self.radius):  # the first unblocked order
+            teams = list(min(permutations(teams), key=lambda o: blocked_ways(progress, lateral, list(o), self.radius)))
         anchors: list[float] = []
         self.order, self.slots, self.file_weights = [], [], []
         last_depth = 0.0
