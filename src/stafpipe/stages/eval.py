@@ -31,7 +31,8 @@ from stafpipe.world import WorldConfig
 log = logging.getLogger(__name__)
 SEED_STRIDE = 100_003
 AUTO_BATCH = 50
-"""`eval.batch=0`: episodes run at once (benchmarks/eval_batch_time.py measured the speed-up levelling off by here)."""
+"""`eval.batch=0`: episodes run at once. Measured on 2 cores, 50 corridor episodes: the speed-up levels off from 10-25
+worlds (DGNN 16.3 s one at a time, 4.5 s at 10, 3.9 s at 25 and 50) and 50 is no slower than those."""
 
 
 def episode_seed(seed: int, k: int) -> int:
