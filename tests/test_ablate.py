@@ -38,6 +38,7 @@ def test_noise_study_agrees_with_itself_without_noise(workdir) -> None:
     assert df[df.sigma == 0.5].ari.mean() < 1.0
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_subteam_count_and_classical_studies_give_m_nonempty_subteams(workdir) -> None:
     counts = _run(workdir, "ablate.study=subteam_count", *SMALL)
     assert len(counts) == 2 * 2 * 12 and (counts.subteams_used == counts.m).all()

@@ -16,6 +16,7 @@ def _results(workdir, *overrides) -> pd.DataFrame:
     return pd.read_parquet(run / "results.parquet")
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_lf_in_the_open_reaches_the_goal_in_formation_near_the_time_bound(workdir) -> None:
     r = _results(workdir, "scenario.obstacles=[]", "formation=wedge").iloc[0]
     assert r.sr == 1.0 and r.collisions == 0

@@ -85,6 +85,7 @@ def test_batched_env_rewards_are_the_trainers(method) -> None:
     )
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_torchrl_drives_the_environment_through_its_pettingzoo_wrapper() -> None:
     pytest.importorskip("torchrl")  # the `torchrl` extra: a third-party library stepping our environment
     from torchrl.envs.libs.pettingzoo import PettingZooWrapper

@@ -151,6 +151,7 @@ def test_train_ppo_stage_resume_eval_and_plot(workdir) -> None:
     assert result.exit_code == 0 and "learning_curves.png" in result.output
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_bad_policy_checkpoint_and_settings_are_refused(workdir) -> None:
     (workdir / "junk.pt").write_bytes(b"junk")
     assert launch("eval", ["method=dgnn", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2

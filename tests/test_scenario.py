@@ -64,6 +64,7 @@ def test_shortest_path_goes_around_an_obstacle() -> None:
     assert 32.0 < path_length(path) < 32.0 + 2 * (2**0.5 - 1) * 1.2 + 0.2
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_issue_example_loads_and_runs_as_written(workdir) -> None:
     code = launch("eval", [f"scenario.path={DATA / 's_example.yaml'}", "eval.episodes=1"])
     assert code == 0

@@ -64,6 +64,7 @@ def test_train_high_stage_writes_checkpoint_losses_and_curves(workdir) -> None:
     assert board["train/total"] == want
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_train_high_on_a_generated_file_and_bad_inputs(workdir) -> None:
     assert launch("generate", ["data.instances=32", "hydra.run.dir=gen"]) == 0
     assert launch("train-high", [*TINY, "train_high.data=gen"]) == 0

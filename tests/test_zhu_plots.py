@@ -46,6 +46,7 @@ def test_regions_snapshots_and_timing_table_from_a_zhu_run(workdir) -> None:
     assert r"\begin{tabular}" in tex and "Graph partition" in tex
 
 
+@pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_timing_of_a_run_without_zhu_is_refused_and_writes_nothing(workdir) -> None:
     assert launch("eval", ["method=straight", "scenario=corridor", "scenario.time_limit=3", "eval.episodes=1"]) == 0
     [run] = job_dirs(workdir / "outputs" / "eval")
