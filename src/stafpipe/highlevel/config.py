@@ -98,8 +98,10 @@ class TrainHighConfig:
     m_choices: list[int] = field(default_factory=lambda: [2, 3, 4])
     """Each team, each epoch, is cut into m subteams drawn from this list (capped at n - 1)."""
     loss: LossWeights = field(default_factory=LossWeights)
-    threads: int = 2
-    """torch threads (this project's machines have 2 cores)."""
+    threads: int = 1
+    """torch threads. 1: the same weights for a seed on every run (measured 2026-11-28: two runs of the loss-term
+    ablation with 2 threads gave weights up to 0.24 apart, with 1 thread bit-identical) and no slower on 2 cores
+    (10 epochs: 32 s against 34 s with 2; two 2-thread runs side by side took 7x as long, docs/method.md)."""
     device: str = "cpu"
     """Where the network and its training run: `cpu`, or `cuda` / `cuda:N` where the machine has one (a clear error
     where it has not). The data are built on the CPU; the checkpoint is saved for the CPU either way."""
