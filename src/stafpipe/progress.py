@@ -8,7 +8,7 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import TypeVar
 
 from tqdm import tqdm
@@ -58,10 +58,20 @@ class _Heartbeat(threading.Thread):
 
 class progress(Iterable[T]):
     """Iterate `items` showing progress: tqdm on a terminal, periodic log lines otherwise; `set_postfix` adds
-    key=value notes (the latest training success rate, ...) to either."""
+    key=value notes (the latest training success rate, ...) to either. `size(item)`: how many units an item is (a
+    batch of episodes counts its episodes); 1 by default."""
 
-    def __init__(self, items: Iterable[T], desc: str, unit: str, total: int | None = None, initial: int = 0) -> None:
+    def __init__(
+        self,
+        items: Iterable[T],
+        desc: str,
+        unit: str,
+        total: int | None = None,
+        initial: int = 0,
+        size: Callable[[T], int] | None = None,
+    ) -> None:
         self.items, self.desc, self.unit, self.initial = items, desc, unit, initial
+        self.size = size or (lambda _item: 1)
         self.total = initial + len(items) if total is None else total  # type: ignore[arg-type]
         self._bar: tqdm | None = None
         self._beat: _Heartbeat | None = None
@@ -74,14 +84,19 @@ class progress(Iterable[T]):
 
     def __iter__(self) -> Iterator[T]:
         if sys.stderr.isatty():
-            self._bar = tqdm(self.items, desc=self.desc, unit=self.unit, total=self.total, initial=self.initial)
-            yield from self._bar
+            self._bar = tqdm(desc=self.desc, unit=self.unit, total=self.total, initial=self.initial)
+            try:
+                for item in self.items:
+                    yield item
+                    self._bar.update(self.size(item))
+            finally:
+                self._bar.close()
             return
         self._beat = _Heartbeat(self.desc, self.unit, self.total, self.initial)
         self._beat.start()
         try:
             for item in self.items:
                 yield item
-                self._beat.done += 1
+                self._beat.done += self.size(item)
         finally:
             self._beat.stop()

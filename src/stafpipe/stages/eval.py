@@ -95,7 +95,7 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     rows, outputs = [], []
     batches = [list(range(first, min(first + size, ev.episodes))) for first in range(0, ev.episodes, size)]
     desc = f"eval {method_cfg.name} on {scenario.name} ({ev.episodes} episodes in batches of <= {size})"
-    for ks in progress(batches, desc=desc, unit="batch"):
+    for ks in progress(batches, desc=desc, unit="episode", total=ev.episodes, size=len):
         seeds = [episode_seed(int(cfg.seed), k) for k in ks]
         logs = [out_dir / "episodes" / f"episode_{k:04d}.mcap" if ev.log_episodes else None for k in ks]
         results = run_episodes(
