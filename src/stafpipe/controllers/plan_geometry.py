@@ -3,6 +3,8 @@ formation extents, and targets kept apart."""
 
 from __future__ import annotations
 
+from itertools import permutations
+
 import numpy as np
 
 from stafpipe.formations import formation_slots
@@ -106,3 +108,11 @@ def blocked_ways(progress: np.ndarray, lateral: np.ndarray, order: list[np.ndarr
         in_lane = np.abs(lateral[later][None, :] - lateral[ahead][:, None]) < 2 * radius + 0.1
         count += int((in_front & in_lane).sum())
     return count
+
+
+def unblocked_order(order: list[np.ndarray], progress: np.ndarray, lateral: np.ndarray, radius: float) -> list:
+    """`order` itself if no robot is met head-on in it (`blocked_ways`), else the order of the same subteams with the
+    fewest such robots (the first found: ties keep the given order's preference)."""
+    if not blocked_ways(progress, lateral, order, radius):
+        return order
+    return list(min(permutations(order), key=lambda o: blocked_ways(progress, lateral, list(o), radius)))

@@ -17,18 +17,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from itertools import permutations
 
 import numpy as np
 
-from stafpipe.controllers.plan_geometry import (
-    PathFrame,
-    blocked_ways,
-    extent,
-    lateral_clearance,
-    separated,
-    unit_slots,
-)
+from stafpipe.controllers import plan_geometry as geo
+from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_clearance, separated, unit_slots
 from stafpipe.formations import assign_slots
 from stafpipe.geometry import obstacle_distance
 
@@ -90,9 +83,8 @@ class PlanConfig:
     far straight behind it (along the way in), so that robots arriving later do not cut past or into robots already
     seated; 0: as trained (later subteams follow the path to its end). docs/staf.md."""
     unblock: bool = True
-    """At the split, if a robot of a waiting subteam stands in the lane ahead of a robot of a subteam that goes
-    before it (`plan_geometry.blocked_ways`), the subteams go in the order with the fewest such robots (ties: the
-    usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""
+    """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
+    ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""
 
     def check(self, key: str) -> None:
         from stafpipe.errors import require
@@ -174,9 +166,8 @@ class StafPlan:
 
         if self.cfg.m != "auto":
             return min(int(self.cfg.m), max(1, self.n - 1))
-        return choose_m(self.kind, self.n, eta, self.radius, self.cfg.safe_gap, min(4, max(1, self.n - 1)), self.angle)[
-            0
-        ]
+        most = min(4, max(1, self.n - 1))
+        return choose_m(self.kind, self.n, eta, self.radius, self.cfg.safe_gap, most, self.angle)[0]
 
     def reset(self) -> None:
         self.labels = np.zeros(self.n, dtype=int)
@@ -252,8 +243,8 @@ class StafPlan:
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
         lateral = self.frame.lateral(pos)
         teams.sort(key=lambda idx: -(progress[idx].mean() - np.abs(lateral[idx]).mean()))
-        if self.cfg.unblock and blocked_ways(progress, lateral, teams, self.radius):  # the first unblocked order
-            teams = list(min(permutations(teams), key=lambda o: blocked_ways(progress, lateral, list(o), self.radius)))
+        if self.cfg.unblock:  # unless a waiting robot stands in the way of one that goes before it
+            teams = geo.unblocked_order(teams, progress, lateral, self.radius)
         anchors: list[float] = []
         self.order, self.slots, self.file_weights = [], [], []
         last_depth = 0.0
