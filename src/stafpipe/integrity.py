@@ -172,12 +172,5 @@ def formation_integrities(
 
 def formation_integrity(p: np.ndarray, kind: str, spacing: float, heading: float, angle_deg: float = 90.0) -> float:
     """Epsilon of CFI for robots `p` meant to hold formation `kind`."""
-    if kind == "circle":
-        return circle_integrity(p)
-    if kind == "wedge":
-        return wedge_shape_integrity(p, WEDGE_APEX_DEG)
-    if kind == "v":
-        return v_integrity(p, heading, angle_deg)
-    if kind == "line":
-        return line_integrity(p)
-    return shape_integrity(p, kind, spacing, heading, angle_deg)
+    group = np.asarray(p, float)[None]
+    return float(formation_integrities(group, kind, spacing, np.array([heading]), angle_deg)[0])
