@@ -16,6 +16,7 @@ from stafpipe.geometry import Geometry
 from stafpipe.launch import launch
 from stafpipe.scenario import TeamSpec, build_scenario
 from stafpipe.sensing import SensingConfig
+from stafpipe.stages.eval import auto_batch
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
 
@@ -84,3 +85,8 @@ def test_eval_batch_size_changes_nothing_but_the_time(workdir) -> None:
     runs = sorted(p.parent for p in workdir.glob("outputs/eval/*/*/stage.json"))
     one, two = (pd.read_parquet(r / "results.parquet") for r in runs)
     pd.testing.assert_frame_equal(one, two)
+
+
+def test_the_automatic_batch_keeps_large_teams_small() -> None:
+    """Observations hold (B, n, n) arrays: 50 worlds of ten robots, but only 5 of 1,000 and one of 3,000."""
+    assert (auto_batch(10), auto_batch(316), auto_batch(1000), auto_batch(3000)) == (50, 50, 5, 1)

@@ -115,7 +115,8 @@ class EvalConfig:
     `stafpipe plot table` (e.g. the `staf_levels` ablation)."""
     batch: int = 0
     """Episodes run at once, in parallel worlds of one batched world (one network call per step for all of them in
-    a learned method); 0: all of them up to `AUTO_BATCH`. An episode's result does not depend on this (a test)."""
+    a learned method); 0: all of them, up to 50 and up to 5 M robot pairs (`stages.eval.auto_batch`: 5 worlds
+    of 1,000 robots). An episode's result does not depend on this (a test)."""
 
     def check(self, key: str = "eval") -> None:
         require(self.episodes >= 1, f"{key}.episodes", "must be >= 1", self.episodes)

@@ -33,6 +33,14 @@ SEED_STRIDE = 100_003
 AUTO_BATCH = 50
 """`eval.batch=0`: episodes run at once. Measured on 2 cores, 50 corridor episodes: the speed-up levels off from 10-25
 worlds (DGNN 16.3 s one at a time, 4.5 s at 10, 3.9 s at 25 and 50) and 50 is no slower than those."""
+PAIRS_PER_BATCH = 5_000_000
+"""`eval.batch=0` caps the batch at this many robot pairs (B x n^2): observations hold (B, n, n, ...) arrays, so 50
+worlds of 1,000 robots would need several GB; 5 M pairs keep them to a few hundred MB (5 worlds of 1,000 robots)."""
+
+
+def auto_batch(n: int) -> int:
+    """The batch `eval.batch=0` runs for teams of n robots."""
+    return max(1, min(AUTO_BATCH, PAIRS_PER_BATCH // (n * n)))
 
 
 def episode_seed(seed: int, k: int) -> int:
@@ -91,7 +99,7 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     method_cfg: Any = OmegaConf.to_object(cfg.method)
     geometry = Geometry.of(scenario)
     controller = make_controller(method_cfg)  # once: a learned method loads its checkpoints here
-    size = ev.batch or AUTO_BATCH
+    size = ev.batch or auto_batch(scenario.spec.team.n)
     rows, outputs = [], []
     batches = [list(range(first, min(first + size, ev.episodes))) for first in range(0, ev.episodes, size)]
     desc = f"eval {method_cfg.name} on {scenario.name} ({ev.episodes} episodes in batches of <= {size})"
