@@ -97,15 +97,20 @@ def lateral_clearance(
     return out
 
 
+LANE_MARGIN = 0.1
+"""m added to a robot's diameter for the lane ahead of it (`blocked_ways`): two robots closer across than 2r + this
+cannot pass each other without one giving way; chosen as the plan's `target_gap`, not tuned."""
+
+
 def blocked_ways(progress: np.ndarray, lateral: np.ndarray, order: list[np.ndarray], radius: float) -> int:
     """How many robots of later subteams stand in the way of robots of earlier ones in a subteam order: more than a
-    radius ahead along the path, and less than a diameter + 0.1 m across from it (in its lane). The earlier subteam
+    radius ahead along the path, and less than 2r + LANE_MARGIN across from it (in its lane). The earlier subteam
     moves on while the later ones wait where they are, so such a robot is met head-on."""
     count = 0
     for j in range(len(order) - 1):
         ahead, later = order[j], np.concatenate(order[j + 1 :])
         in_front = progress[later][None, :] - progress[ahead][:, None] > radius
-        in_lane = np.abs(lateral[later][None, :] - lateral[ahead][:, None]) < 2 * radius + 0.1
+        in_lane = np.abs(lateral[later][None, :] - lateral[ahead][:, None]) < 2 * radius + LANE_MARGIN
         count += int((in_front & in_lane).sum())
     return count
 
