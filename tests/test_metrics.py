@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import numpy as np
@@ -135,3 +136,32 @@ def test_links_are_sensed_pairs_when_robots_hide_each_other() -> None:
     assert connectivity(row, radius=10.0, occlusion_radius=0.5)[0][0] == 2
     apart = np.array([[0.0, 0.0], [2.0, 3.0], [4.0, 0.0]])[None]  # nobody in between
     assert connectivity(apart, radius=10.0, occlusion_radius=0.5)[0][0] == 3
+
+
+def test_cfi_in_the_passage_counts_only_samples_a_subteam_spends_there() -> None:
+    """A 3-robot line walks along x through a passage at x in [4, 6] of a path from (0, 0) to (10, 0): abreast and
+    9 m wide before it, a perfect line 2.4 m wide (eta + 0.4: in the sigma-0.5 band) while any robot is inside."""
+    line = np.array([[0.0, -1.0], [0.0, 0.0], [0.0, 1.0]])  # 1 m apart across the way: 2r = 2.4 m
+    wide = np.array([[0.0, -4.3], [0.0, 0.0], [0.0, 4.3]])  # 9 m wide: gap term 0
+    xs = np.arange(0.0, 10.01, 0.5)
+    pos = np.stack([(line if 3.5 <= x <= 6.5 else wide) + [x, 0.0] for x in xs])
+    z = np.zeros(pos.shape[:2])
+    traj = Trajectory(xs, pos, np.zeros_like(pos), z.astype(int), line + [10.0, 0.0], z + 1.0)
+    ctx = MetricContext(0.2, "line", 1.0, 90.0, 0.0, passage_width=2.2, travel_time_lower_bound=1.0, cfi_margin=0.1,
+                        path=((0.0, 0.0), (10.0, 0.0)), passages=((4.0, 6.0),))  # fmt: skip
+    m = episode_metrics(traj, ctx)
+    assert m["cfi_passage_0.5"] == pytest.approx(1.0)  # x = 4.0 .. 6.0: five samples, each gap 1 and epsilon 1
+    inside = 5 / len(xs)  # the other samples: the wide line (epsilon 1, gap 0) or the line outside (gap 1)
+    assert m["cfi_0.5"] == pytest.approx(inside * 1.0 + (2 / len(xs)) * 1.0 + (1 - inside - 2 / len(xs)) * 0.5)
+    assert math.isnan(episode_metrics(traj, dataclasses.replace(ctx, passages=()))["cfi_passage_0.5"])
+
+
+def test_the_corridors_passage_is_where_its_walls_are() -> None:
+    from stafpipe.episode import episode_context
+    from stafpipe.geometry import Geometry
+    from stafpipe.sensing import SensingConfig
+    from stafpipe.stages.train_ppo import load_named_scenario
+
+    corridor = load_named_scenario("corridor")  # walls from x = 12 to 18; the path starts at x = 4
+    ctx, _ = episode_context(corridor, Geometry(corridor), SensingConfig(), 0.3, 0.1)
+    assert ctx.passages == ((8.0, 14.0),)

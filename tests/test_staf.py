@@ -111,7 +111,9 @@ def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
     (targets of a perfect k-robot formation at the team's spacing, facing along the path)."""
     sc = _scenario("corridor", kind)
     t = sc.spec.team
-    pos, plan = _start_and_plan(sc, divide, PlanConfig(split_distance=100.0))
+    # the path starts at the team's centre; clipped there (extend_path=false), the rear robots all stand at progress
+    # 0 and their subteam waits; on the extended path they stand far enough behind to follow at once
+    pos, plan = _start_and_plan(sc, divide, PlanConfig(split_distance=100.0, extend_path=False))
     target = plan.step(pos, 0.1)
     assert len(plan.order) > 1
     # the targets slide from the robots into the new slots: no target jumps more than a step at top speed
@@ -171,8 +173,9 @@ def test_default_plan_gives_two_subteams(divide, kind) -> None:
     assert log["labels"][split].max() == 1  # two subteams
     assert log["min_wall"] > 0.0
     if kind == "wedge":  # a 5-robot wedge at 1 m spacing does not fit 2.4 m: at nominal spacing the policy must adapt
-        _, nominal, _ = _ideal_run(sc, divide, plan_cfg=PlanConfig(adapt="nominal"))
-        assert nominal["min_wall"] < 0.0
+        _, shrunk, _ = _ideal_run(sc, divide, plan_cfg=PlanConfig(balance=True))  # subteams of five (the cut: 7-3)
+        _, nominal, _ = _ideal_run(sc, divide, plan_cfg=PlanConfig(adapt="nominal", balance=True))
+        assert shrunk["min_wall"] > 0.0 > nominal["min_wall"]
 
 
 @pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
@@ -429,7 +432,8 @@ def test_the_split_sends_first_a_subteam_no_waiting_robot_stands_in_front_of() -
     """A T of 6 facing +x cut into the bar (0, 2, 3) and the stem with robot 1 (1, 4, 5): the usual order (further
     along and nearer the path first) sends the stem first, straight into robot 2 of the waiting bar; `unblock` sends
     the bar first, and with it off the usual order stands. (The ids and positions of a failing episode on a generated
-    map, docs/staf.md.)"""
+    map, docs/staf.md, on the path as it was then: clipped at its start, where robots 4 and 5 stand behind it; on the
+    extended path their progress is below 0 and the usual order already sends the bar first.)"""
     sc = load_named_scenario("corridor")
     pos = np.array([[3.2, 7.5], [3.1, 6.3], [3.3, 5.7], [3.0, 4.6], [2.1, 6.0], [1.1, 6.0]])
     goal = pos + [22.0, 0.0]
@@ -437,10 +441,32 @@ def test_the_split_sends_first_a_subteam_no_waiting_robot_stands_in_front_of() -
     labels = np.array([1, 0, 1, 1, 0, 0])
     for unblock, first in ((False, [1, 4, 5]), (True, [0, 2, 3])):
         plan = StafPlan(
-            PlanConfig(unblock=unblock), sc, pos - pos.mean(axis=0), goal, path, 2.4, lambda p, g, m: labels
+            PlanConfig(unblock=unblock, extend_path=False),
+            sc,
+            pos - pos.mean(axis=0),
+            goal,
+            path,
+            2.4,
+            lambda p, g, m: labels,
         )
         plan._split(pos, plan.frame.progress(pos))
         assert sorted(plan.order[0].tolist()) == first
         lateral = plan.frame.lateral(pos)
         blocked = blocked_ways(plan.frame.progress(pos), lateral, plan.order, sc.spec.robot.radius)
         assert (blocked == 0) == unblock  # robot 2 stands 1.2 and 2.2 m ahead of robots 4 and 5, 0.3 m across
+
+
+def test_the_extended_path_reaches_back_behind_its_start() -> None:
+    """`plan.extend_path`: arc lengths below 0 lie straight behind the start (slots placed there stay apart instead of
+    all falling on the start point); the end is still the end."""
+    from stafpipe.controllers.plan_geometry import PathFrame
+
+    path = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]])
+    clipped, extended = PathFrame(path), PathFrame(path, extend=True)
+    behind = np.array([[-2.0, 0.5], [-1.0, -0.5], [4.0, 9.0]])
+    assert clipped.progress(behind) == pytest.approx([0.0, 0.0, 7.0])
+    assert extended.progress(behind) == pytest.approx([-2.0, -1.0, 7.0])  # beyond the end: still clipped at it
+    points, _ = extended.at(np.array([-1.5, -0.5, 2.0, 9.0]))
+    assert points == pytest.approx(np.array([[-1.5, 0.0], [-0.5, 0.0], [2.0, 0.0], [4.0, 3.0]]))
+    assert clipped.at(np.array([-1.5, -0.5]))[0] == pytest.approx(np.zeros((2, 2)))
+    assert extended.lateral(behind[:2]) == pytest.approx([0.5, -0.5])

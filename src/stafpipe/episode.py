@@ -79,6 +79,8 @@ def episode_context(
     per_robot = float(np.linalg.norm(np.subtract(t.goal, t.start)))  # every slot moves by the centre's displacement
     lower_bound = max(path_length(path), per_robot) / r.max_speed
     ctx = MetricContext(
+        path=tuple(map(tuple, path.tolist())),
+        passages=narrow_stretches(scenario, geometry, path, cfi_margin),
         robot_radius=r.radius,
         formation=t.formation,
         spacing=t.spacing,
@@ -92,6 +94,22 @@ def episode_context(
         occlusion=sensing.occlusion,
     )
     return ctx, path
+
+
+def narrow_stretches(scenario: Scenario, geometry: Geometry, path: np.ndarray, margin: float) -> tuple:
+    """((from, to), ...) arc lengths along `path` where the free width straight across it, less `margin` on each
+    side, is narrower than the whole team in its formation (slots' width across the heading plus a body): the
+    passages a team must split or adapt its formation for. Sampled every 0.1 m; remembered per geometry."""
+    from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_clearance
+
+    frame, ds = PathFrame(path), 0.1
+    points, heading = frame.at(np.arange(0.0, frame.length + ds, ds))
+    key = ("free_width", points.tobytes(), heading.tobytes())
+    width = geometry.remember(key, lambda: lateral_clearance(points, heading, scenario, both=True))
+    narrow = width - 2 * margin < extent(scenario.template(), scenario.spec.robot.radius)[1]
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], narrow.astype(int), [0]])))
+    runs = zip(edges[::2], edges[1::2], strict=True)  # [first, last + 1) sample of each narrow run
+    return tuple((round(float(a * ds), 6), round(float((b - 1) * ds), 6)) for a, b in runs)
 
 
 def obstacle_distances(scenario: Scenario, positions: np.ndarray, movers: np.ndarray) -> np.ndarray:

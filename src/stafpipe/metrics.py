@@ -67,6 +67,11 @@ class MetricContext:
     """Whether robots hide robots behind them (`sensing.occlusion`): a link is then a pair that sense each other."""
     """Safety margin taken off each side of the passage: eta = passage_width - 2 margin (STAF Sec. 4 'with safety
     margin')."""
+    path: tuple = ()
+    """The team centre's shortest path ((x, y), ...) that `passages` measure along (empty: no passage known)."""
+    passages: tuple = ()
+    """((from, to), ...) arc lengths along `path` where the whole team in its formation does not fit across the free
+    width (`episode.narrow_stretches`): where CFI's gap term has a gap to judge (`cfi_passage_*`)."""
 
 
 def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -128,15 +133,32 @@ def _group_terms(
     return np.array([d for d, _ in terms]), np.array([e for _, e in terms])
 
 
+def _entries(traj: Trajectory) -> list[tuple[int, np.ndarray]]:
+    """(sample, robots of one subteam) for every subteam at every sample: samples in order, subteams by id."""
+    return [(k, np.flatnonzero(sub == team)) for k, sub in enumerate(traj.subteams) for team in np.unique(sub)]
+
+
+def in_passage(positions: np.ndarray, ctx: MetricContext) -> np.ndarray:
+    """(T+1, n) whether each robot's projection on the team's path lies in one of `ctx.passages`."""
+    if not ctx.passages or len(ctx.path) < 2:
+        return np.zeros(positions.shape[:2], dtype=bool)
+    from stafpipe.controllers.plan_geometry import PathFrame
+
+    s = PathFrame(np.asarray(ctx.path, float)).progress(positions.reshape(-1, 2)).reshape(positions.shape[:2])
+    return np.any([(s >= lo) & (s <= hi) for lo, hi in ctx.passages], axis=0)
+
+
+def passage_mask(traj: Trajectory, ctx: MetricContext) -> np.ndarray:
+    """Per (sample, subteam) entry of `cfi_terms`: whether any robot of the subteam is in a passage."""
+    inside = in_passage(traj.positions, ctx)
+    return np.array([bool(inside[k, idx].any()) for k, idx in _entries(traj)])
+
+
 def cfi_terms(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per (sample, subteam): the team's diameter 2 r (r = max distance of a robot's edge from the subteam's centroid)
     and its integrity epsilon. Returns flat arrays (diameter, epsilon), samples in order, subteams by id within one."""
     memo = {} if memo is None else memo
-    entries = [
-        (k, np.flatnonzero(traj.subteams[k] == team))
-        for k in range(len(traj.time))
-        for team in np.unique(traj.subteams[k])
-    ]
+    entries = _entries(traj)
     groups: dict[bytes, tuple[np.ndarray, list[int]]] = {}
     for k, idx in entries:
         groups.setdefault(idx.tobytes(), (idx, []))[1].append(k)
@@ -250,5 +272,8 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
         out[f"cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
     for sigma in CFI_SIGMAS:
         out[f"cfi_printed_{sigma:g}"] = cfi_printed(diam, eps, eta, sigma)
+    inside = passage_mask(traj, ctx)
+    for sigma in CFI_SIGMAS:  # the same CFI over the samples a subteam spends in the passage (docs/metrics.md)
+        out[f"cfi_passage_{sigma:g}"] = cfi(diam[inside], eps[inside], eta, sigma) if inside.any() else math.nan
     out.update(subteam_metrics(traj, ctx, memo))
     return out

@@ -12,9 +12,12 @@ from stafpipe.geometry import obstacle_distance
 
 
 class PathFrame:
-    """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections."""
+    """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections. `extend`: the path
+    reaches back straight behind its start (arc lengths below 0), so that slots placed behind the start do not all
+    fall on the start point."""
 
-    def __init__(self, path: np.ndarray) -> None:
+    def __init__(self, path: np.ndarray, extend: bool = False) -> None:
+        self.extend = extend
         path = np.asarray(path, float)
         keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
         self.path = path[keep] if keep.sum() >= 2 else np.stack([path[0], path[0] + [1e-6, 0.0]])
@@ -25,8 +28,8 @@ class PathFrame:
         self.length = float(self.cum[-1])
 
     def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        """Points (.., 2) and headings (..) at arc lengths s (clipped to the path)."""
-        s = np.clip(np.asarray(s, float), 0.0, self.length)
+        """Points (.., 2) and headings (..) at arc lengths s (clipped to the path, or only at its end if extended)."""
+        s = np.clip(np.asarray(s, float), -np.inf if self.extend else 0.0, self.length)
         k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg_len) - 1)
         point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
         return point, np.arctan2(self.unit[k, 1], self.unit[k, 0])
@@ -34,7 +37,12 @@ class PathFrame:
     def progress(self, points: np.ndarray) -> np.ndarray:
         """Arc length (P,) of each point's projection on the path."""
         t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
-        t = np.clip(t, 0.0, self.seg_len)
+        if self.extend:  # the first segment reaches back
+            lo = np.zeros(len(self.seg_len))
+            lo[0] = -np.inf
+            t = np.clip(t, lo, self.seg_len)
+        else:
+            t = np.clip(t, 0.0, self.seg_len)
         proj = self.path[None, :-1] + t[..., None] * self.unit[None]
         k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
         return self.cum[k] + t[np.arange(len(points)), k]
@@ -79,22 +87,22 @@ def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
 
 
 def lateral_clearance(
-    points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0, step: float = 0.05
+    points: np.ndarray, heading: np.ndarray, scenario, reach: float = 10.0, step: float = 0.05, both: bool = False
 ) -> np.ndarray:
     """(P,) free distance from each path point to the nearest obstacle straight across the path (the smaller of the
     left and right sides, up to `reach`): the half-width a formation centred on the path may use. Distance to
-    obstacles ahead or behind does not count (a wall behind the goal does not make the goal area narrow)."""
+    obstacles ahead or behind does not count (a wall behind the goal does not make the goal area narrow).
+    `both`: the sum of the two sides instead, the free width across the path wherever the path runs in it."""
     if not scenario.capsules and not scenario.polygons:
-        return np.full(len(points), reach)
+        return np.full(len(points), 2 * reach if both else reach)
     normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
     offsets = np.arange(0.0, reach + step, step)
-    out = np.full(len(points), reach)
+    sides = []
     for side in (1.0, -1.0):
         rays = points[:, None] + side * offsets[None, :, None] * normal[:, None]
         blocked = obstacle_distance(rays.reshape(-1, 2), scenario).reshape(len(points), len(offsets)) <= 0.0
-        first = np.where(blocked.any(axis=1), offsets[blocked.argmax(axis=1)], reach)
-        out = np.minimum(out, first)
-    return out
+        sides.append(np.where(blocked.any(axis=1), offsets[blocked.argmax(axis=1)], reach))
+    return sides[0] + sides[1] if both else np.minimum(sides[0], sides[1])
 
 
 LANE_MARGIN = 0.1

@@ -82,6 +82,10 @@ class PlanConfig:
     its robots then start for home, and a target more than this far behind its goal slot enters the slot from this
     far straight behind it (along the way in), so that robots arriving later do not cut past or into robots already
     seated; 0: as trained (later subteams follow the path to its end). docs/staf.md."""
+    extend_path: bool = True
+    """The path reaches back straight behind its start (`PathFrame(extend=True)`): slots the plan places
+    behind the start (a waiting subteam's, a column's rear) stay where they belong instead of all falling on the start
+    point, where they crowded robots that stood behind or beside it; false: clipped to the path, as trained."""
     unblock: bool = True
     """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
     ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""
@@ -124,7 +128,7 @@ class StafPlan:
         self.goal = self.goal_slots.copy()
         """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are
         alike."""
-        self.frame = PathFrame(path)
+        self.frame = PathFrame(path, extend=cfg.extend_path)
         # the way into the goal area (the path's chord over its last 2 m): robots going home enter their slots along it
         chord = self.frame.path[-1] - self.frame.at(max(0.0, self.frame.length - 2.0))[0]
         self.way_in = chord / max(float(np.linalg.norm(chord)), 1e-9)

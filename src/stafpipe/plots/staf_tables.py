@@ -35,6 +35,7 @@ METRICS = (
     "tt_arrived",
     *(f"cfi_{s:g}" for s in CFI_SIGMAS),
     *(f"cfi_printed_{s:g}" for s in CFI_SIGMAS),
+    *(f"cfi_passage_{s:g}" for s in CFI_SIGMAS),
     "tt_ratio",
     "collisions",
 )
@@ -94,6 +95,7 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         "CFI 0.1 %",
         "CFI 0.01 %",
         "CFI as printed 0.5 / 0.1 / 0.01 %",
+        "CFI in the passage 0.5 / 0.1 / 0.01 %",
         "TT / bound",
         "collisions",
         "all robots ok",
@@ -115,6 +117,8 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         cells.insert(2, _cell(r.get("tt_arrived", math.nan), r.get("tt_arrived_ci95", math.nan)))
         printed = [r.get(f"cfi_printed_{s:g}", math.nan) for s in CFI_SIGMAS]  # means; CIs in table.csv
         cells.append(" / ".join(f"{100 * v:.1f}" for v in printed) if np.all(np.isfinite(printed)) else "-")
+        passage = [r.get(f"cfi_passage_{s:g}", math.nan) for s in CFI_SIGMAS]  # runs before it existed: "-"
+        cells.append(" / ".join(f"{100 * v:.1f}" for v in passage) if np.all(np.isfinite(passage)) else "-")
         cells += [
             _cell(r.get("tt_ratio", math.nan), r.get("tt_ratio_ci95", math.nan), 1, 2),
             _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),

@@ -25,8 +25,13 @@ def cell(method: str, formation: str) -> dict[str, Any]:
 
 
 def _cfi_note(ev: Evidence, method: str, formation: str) -> str:
-    printed = ev.number("cfi_printed_0.5", 100, " %", **cell(method, formation))
-    return f"with the printed gap term: {printed.text()}" if not math.isnan(printed.value) else ""
+    """The other readings of the same episodes (docs/metrics.md): the printed gap term, and in the passage only."""
+    notes = []
+    for column, name in (("cfi_printed_0.5", "with the printed gap term"), ("cfi_passage_0.5", "in the passage")):
+        number = ev.number(column, 100, " %", **cell(method, formation))
+        if not math.isnan(number.value):
+            notes.append(f"{name}: {number.text()}")
+    return "; ".join(notes)
 
 
 def _mean(column: str, where: dict[str, Any], criterion: Criterion, note: str = "") -> Callable[[Evidence], Measured]:
