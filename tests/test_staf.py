@@ -459,7 +459,7 @@ def test_the_split_sends_first_a_subteam_no_waiting_robot_stands_in_front_of() -
 def test_the_extended_path_reaches_back_behind_its_start() -> None:
     """`plan.extend_path`: arc lengths below 0 lie straight behind the start (slots placed there stay apart instead of
     all falling on the start point); the end is still the end."""
-    from stafpipe.controllers.plan_geometry import PathFrame
+    from stafpipe.geometry import PathFrame
 
     path = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 3.0]])
     clipped, extended = PathFrame(path), PathFrame(path, extend=True)

@@ -100,7 +100,8 @@ def narrow_stretches(scenario: Scenario, geometry: Geometry, path: np.ndarray, m
     """((from, to), ...) arc lengths along `path` where the free width straight across it, less `margin` on each
     side, is narrower than the whole team in its formation (slots' width across the heading plus a body): the
     passages a team must split or adapt its formation for. Sampled every 0.1 m; remembered per geometry."""
-    from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_clearance
+    from stafpipe.controllers.plan_geometry import extent, lateral_clearance
+    from stafpipe.geometry import PathFrame
 
     frame, ds = PathFrame(path), 0.1
     points, heading = frame.at(np.arange(0.0, frame.length + ds, ds))

@@ -142,7 +142,7 @@ def in_passage(positions: np.ndarray, ctx: MetricContext) -> np.ndarray:
     """(T+1, n) whether each robot's projection on the team's path lies in one of `ctx.passages`."""
     if not ctx.passages or len(ctx.path) < 2:
         return np.zeros(positions.shape[:2], dtype=bool)
-    from stafpipe.controllers.plan_geometry import PathFrame
+    from stafpipe.geometry import PathFrame
 
     s = PathFrame(np.asarray(ctx.path, float)).progress(positions.reshape(-1, 2)).reshape(positions.shape[:2])
     return np.any([(s >= lo) & (s <= hi) for lo, hi in ctx.passages], axis=0)

@@ -1,5 +1,5 @@
-"""Geometry the STAF plan works in (controllers/staf_plan.py): a path's arc-length frame, the free width across it,
-formation extents, and targets kept apart."""
+"""Geometry the STAF plan works in (controllers/staf_plan.py): the free width across its path, formation extents,
+and targets kept apart (the path's arc-length frame is `geometry.PathFrame`)."""
 
 from __future__ import annotations
 
@@ -9,49 +9,6 @@ import numpy as np
 
 from stafpipe.formations import formation_slots
 from stafpipe.geometry import obstacle_distance
-
-
-class PathFrame:
-    """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections. `extend`: the path
-    reaches back straight behind its start (arc lengths below 0), so that slots placed behind the start do not all
-    fall on the start point."""
-
-    def __init__(self, path: np.ndarray, extend: bool = False) -> None:
-        self.extend = extend
-        path = np.asarray(path, float)
-        keep = np.concatenate([[True], np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9])
-        self.path = path[keep] if keep.sum() >= 2 else np.stack([path[0], path[0] + [1e-6, 0.0]])
-        seg = np.diff(self.path, axis=0)
-        self.seg_len = np.linalg.norm(seg, axis=1)
-        self.unit = seg / self.seg_len[:, None]
-        self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
-        self.length = float(self.cum[-1])
-
-    def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        """Points (.., 2) and headings (..) at arc lengths s (clipped to the path, or only at its end if extended)."""
-        s = np.clip(np.asarray(s, float), -np.inf if self.extend else 0.0, self.length)
-        k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg_len) - 1)
-        point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
-        return point, np.arctan2(self.unit[k, 1], self.unit[k, 0])
-
-    def progress(self, points: np.ndarray) -> np.ndarray:
-        """Arc length (P,) of each point's projection on the path."""
-        t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
-        if self.extend:  # the first segment reaches back
-            lo = np.zeros(len(self.seg_len))
-            lo[0] = -np.inf
-            t = np.clip(t, lo, self.seg_len)
-        else:
-            t = np.clip(t, 0.0, self.seg_len)
-        proj = self.path[None, :-1] + t[..., None] * self.unit[None]
-        k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
-        return self.cum[k] + t[np.arange(len(points)), k]
-
-    def lateral(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance (P,) of each point from the path, left positive."""
-        point, heading = self.at(self.progress(points))
-        d = points - point
-        return np.cos(heading) * d[:, 1] - np.sin(heading) * d[:, 0]
 
 
 def extent(slots: np.ndarray, radius: float) -> tuple[float, float]:

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from stafpipe.controllers import plan_geometry as geo
-from stafpipe.controllers.plan_geometry import PathFrame, extent, lateral_clearance, separated, unit_slots
+from stafpipe.controllers.plan_geometry import extent, lateral_clearance, separated, unit_slots
 from stafpipe.formations import assign_slots
-from stafpipe.geometry import obstacle_distance
+from stafpipe.geometry import PathFrame, obstacle_distance
 
 WAY_CLEARANCE = 0.05
 """m between a body and the obstacles along every way home before a subteam starts home short of the taken slots
