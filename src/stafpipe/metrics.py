@@ -148,15 +148,12 @@ def in_passage(positions: np.ndarray, ctx: MetricContext) -> np.ndarray:
     return np.any([(s >= lo) & (s <= hi) for lo, hi in ctx.passages], axis=0)
 
 
-def passage_mask(traj: Trajectory, ctx: MetricContext) -> np.ndarray:
-    """Per (sample, subteam) entry of `cfi_terms`: whether any robot of the subteam is in a passage."""
-    inside = in_passage(traj.positions, ctx)
-    return np.array([bool(inside[k, idx].any()) for k, idx in _entries(traj)])
-
-
-def cfi_terms(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per (sample, subteam): the team's diameter 2 r (r = max distance of a robot's edge from the subteam's centroid)
-    and its integrity epsilon. Returns flat arrays (diameter, epsilon), samples in order, subteams by id within one."""
+def cfi_terms(
+    traj: Trajectory, ctx: MetricContext, memo: dict | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per (sample, subteam): the team's diameter 2 r (r = max distance of a robot's edge from the subteam's centroid),
+    its integrity epsilon, and whether any of its robots is in a passage (`cfi_passage_*`). Returns flat arrays,
+    samples in order, subteams by id within one."""
     memo = {} if memo is None else memo
     entries = _entries(traj)
     groups: dict[bytes, tuple[np.ndarray, list[int]]] = {}
@@ -165,7 +162,9 @@ def cfi_terms(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) ->
     for idx, ks in groups.values():  # each group of robots over all the samples it stands as a subteam
         _group_terms(traj, ctx, np.array(ks), idx, memo)
     terms = [memo[(k, idx.tobytes())] for k, idx in entries]
-    return np.array([d for d, _ in terms]), np.array([e for _, e in terms])
+    inside = in_passage(traj.positions, ctx)
+    in_a_passage = np.array([bool(inside[k, idx].any()) for k, idx in entries], dtype=bool)
+    return np.array([d for d, _ in terms]), np.array([e for _, e in terms]), in_a_passage
 
 
 def subteam_metrics(traj: Trajectory, ctx: MetricContext, memo: dict | None = None) -> dict[str, float]:
@@ -241,7 +240,7 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
     """Every metric of one episode, as a flat dict (one row of the results table)."""
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
     memo: dict = {}
-    diam, eps = cfi_terms(traj, ctx, memo)
+    diam, eps, inside = cfi_terms(traj, ctx, memo)
     links, lam2 = connectivity(traj.positions, ctx.sensing_radius, ctx.robot_radius if ctx.occlusion else 0.0)
     pos = traj.positions
     n = pos.shape[1]
@@ -272,7 +271,6 @@ def episode_metrics(traj: Trajectory, ctx: MetricContext) -> dict[str, float]:
         out[f"cfi_{sigma:g}"] = cfi(diam, eps, eta, sigma)
     for sigma in CFI_SIGMAS:
         out[f"cfi_printed_{sigma:g}"] = cfi_printed(diam, eps, eta, sigma)
-    inside = passage_mask(traj, ctx)
     for sigma in CFI_SIGMAS:  # the same CFI over the samples a subteam spends in the passage (docs/metrics.md)
         out[f"cfi_passage_{sigma:g}"] = cfi(diam[inside], eps[inside], eta, sigma) if inside.any() else math.nan
     out.update(subteam_metrics(traj, ctx, memo))
