@@ -14,9 +14,10 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from stafpipe.controllers import Controller, TeamInfo
+from stafpipe.controllers.plan_geometry import extent, lateral_clearance
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
 from stafpipe.faults import ROBOT_FAULTS
-from stafpipe.geometry import Geometry, capsule_arrays, closest_points, path_length
+from stafpipe.geometry import Geometry, PathFrame, capsule_arrays, closest_points, path_length
 from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
 from stafpipe.sensing import SensingConfig
@@ -100,9 +101,6 @@ def narrow_stretches(scenario: Scenario, geometry: Geometry, path: np.ndarray, m
     """((from, to), ...) arc lengths along `path` where the free width straight across it, less `margin` on each
     side, is narrower than the whole team in its formation (slots' width across the heading plus a body): the
     passages a team must split or adapt its formation for. Sampled every 0.1 m; remembered per geometry."""
-    from stafpipe.controllers.plan_geometry import extent, lateral_clearance
-    from stafpipe.geometry import PathFrame
-
     frame, ds = PathFrame(path), 0.1
     points, heading = frame.at(np.arange(0.0, frame.length + ds, ds))
     key = ("free_width", points.tobytes(), heading.tobytes())

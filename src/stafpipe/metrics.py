@@ -16,6 +16,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist
 
+from stafpipe.geometry import PathFrame
 from stafpipe.integrity import formation_integrities
 
 CFI_SIGMAS = (0.5, 0.1, 0.01)  # STAF Table 1 columns
@@ -142,8 +143,6 @@ def in_passage(positions: np.ndarray, ctx: MetricContext) -> np.ndarray:
     """(T+1, n) whether each robot's projection on the team's path lies in one of `ctx.passages`."""
     if not ctx.passages or len(ctx.path) < 2:
         return np.zeros(positions.shape[:2], dtype=bool)
-    from stafpipe.geometry import PathFrame
-
     s = PathFrame(np.asarray(ctx.path, float)).progress(positions.reshape(-1, 2)).reshape(positions.shape[:2])
     return np.any([(s >= lo) & (s <= hi) for lo, hi in ctx.passages], axis=0)
 
