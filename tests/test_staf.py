@@ -221,7 +221,7 @@ def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
 
 def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:
     sc = _scenario("corridor", "circle", 4)
-    worlds = Worlds([sc], SensingConfig(radius=3.0))
+    worlds = Worlds([sc], SensingConfig(radius=3.0, position_noise=0.0))  # exact: features compared with positions
     obs = worlds.reset([0]).world(0)
     target = obs.position + np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.5, 0.5]])
     same = np.array([[1, 1, 0, 0], [1, 1, 0, 0], [0, 0, 1, 1], [0, 0, 1, 1]], dtype=bool)

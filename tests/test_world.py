@@ -1,10 +1,12 @@
 import numpy as np
 import pytest
 
+from stafpipe.formations import place
+from stafpipe.geometry import obstacle_distance
 from stafpipe.paths import conf_dir
-from stafpipe.scenario import ScenarioConfig, TeamSpec, build_scenario, load_scenario_file
+from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario, load_scenario_file
 from stafpipe.sensing import SensingConfig
-from stafpipe.world import Worlds
+from stafpipe.world import WorldConfig, Worlds
 
 
 def corridor():
@@ -93,3 +95,51 @@ def test_sensing_radius_occlusion_drops_and_obstacle_vector() -> None:
     dropped = Worlds([sc], SensingConfig(drop_prob=1.0))
     dropped.reset([0])
     assert not dropped.observe().neighbours.any()
+
+
+def test_the_start_perturbation_never_puts_a_robot_on_a_wall_or_a_robot() -> None:
+    # A tight line (0.5 m slots, 0.1 m between bodies) with its end robots 0.3 m from the walls: a 0.2 m perturbation
+    # would put many of them on each other or the wall; those start on their slots instead.
+    team = TeamSpec(n=6, formation="line", spacing=0.5, start=[2.0, 1.55], goal=[8.0, 1.55], heading_deg=0)
+    sc = build_scenario(ScenarioConfig(name="box", world=WorldBounds(xmax=10.0, ymax=3.1), team=team))
+    r = sc.spec.robot.radius
+    moved = 0
+    for seed in range(20):
+        worlds = Worlds([sc], cfg=WorldConfig(start_noise=0.2))
+        worlds.reset([seed])
+        pos = worlds.pos[0]
+        gaps = np.linalg.norm(pos[:, None] - pos[None], axis=-1)[np.triu_indices(6, 1)]
+        assert gaps.min() > 2 * r and obstacle_distance(pos, sc).min() > r
+        moved += int((np.linalg.norm(pos - place(sc.template(), np.array(team.start), 0.0), axis=1) > 1e-9).sum())
+    assert moved > 20, "the perturbation was dropped for (nearly) every robot"
+
+
+def test_heading_spread_turns_the_start_formation_and_nothing_else() -> None:
+    sc = corridor()
+    plain = Worlds([sc], cfg=WorldConfig(start_noise=0.0))
+    plain.reset([3])
+    turned = Worlds([sc], cfg=WorldConfig(start_noise=0.0, heading_spread_deg=30.0))
+    turned.reset([3])
+    a, b = plain.pos[0], turned.pos[0]
+    assert np.allclose(a.mean(0), b.mean(0)) and np.array_equal(plain.goal, turned.goal)
+    # the same shape, turned: pairwise distances kept, positions not
+    dist = lambda p: np.linalg.norm(p[:, None] - p[None], axis=-1)  # noqa: E731
+    assert np.allclose(dist(a), dist(b)) and np.abs(a - b).max() > 0.05
+    angle = np.degrees(np.arctan2(*(b[0] - b.mean(0))[::-1]) - np.arctan2(*(a[0] - a.mean(0))[::-1]))
+    assert 0 < abs((angle + 180) % 360 - 180) <= 30
+    # the spread has its own random stream: with it at 0 the perturbation is what it was
+    noisy, noisy_spread0 = (Worlds([sc], cfg=WorldConfig(heading_spread_deg=s)) for s in (0.0, 0.0))
+    noisy.reset([3])
+    noisy_spread0.reset([3])
+    assert np.array_equal(noisy.pos, noisy_spread0.pos)
+
+
+def test_episodes_differ_by_default() -> None:
+    # Issue 19: with the default start perturbation and sensing noise, seeded episodes of one scenario are not copies.
+    runs = [_run(Worlds([corridor()]), [s], steps=30) for s in (0, 1, 2)]
+    starts = [Worlds([corridor()]) for _ in range(2)]
+    for w, s in zip(starts, (0, 1), strict=True):
+        w.reset([s])
+    assert np.abs(starts[0].pos - starts[1].pos).max() > 0.1  # centimetres, not millimetres
+    seen = [run.position[0] for run in runs]
+    assert np.abs(seen[0] - seen[1]).max() > 0.02 and np.abs(seen[1] - seen[2]).max() > 0.02

@@ -21,8 +21,9 @@ class SensingConfig:
 
     radius: float = 2.0
     """Neighbour sensing / communication radius in metres (STAF Appendix C: 2 m)."""
-    position_noise: float = 0.0
-    """Standard deviation of Gaussian noise on each robot's own position estimate (STAF Appendix F)."""
+    position_noise: float = 0.02
+    """Standard deviation (m) of Gaussian noise on each robot's own position estimate (STAF Appendix F), drawn anew
+    every step: 2 cm by default, a localisation error of an indoor robot (the papers give none; docs/decisions.md)."""
     range_error: float = 0.0
     """Bound of the uniform error on a neighbour's measured range (Cezayirli's Delta r)."""
     bearing_error_deg: float = 0.0

@@ -21,7 +21,7 @@ from stafpipe.drives import DRIVES
 from stafpipe.errors import ConfigError
 from stafpipe.faults import Fault, drop_probability, robots_hit, transitions
 from stafpipe.formations import place
-from stafpipe.geometry import capsule_arrays
+from stafpipe.geometry import capsule_arrays, obstacle_distance
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import Observation, SensingConfig, observe
 
@@ -44,8 +44,12 @@ class WorldConfig:
     collision_slop: float = 0.005
     """pymunk's allowed overlap; the default 0.1 lets robots leave walled boxes (measured on the 2-core development
     machine)."""
-    start_noise: float = 0.05
-    """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma."""
+    start_noise: float = 0.12
+    """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma; a robot
+    whose perturbed start would touch an obstacle or another robot starts on its slot (docs/decisions.md)."""
+    heading_spread_deg: float = 0.0
+    """Each episode turns the start formation about its centre by an angle drawn uniformly from +-this (degrees); a
+    draw that puts a robot on an obstacle is redrawn (10 tries, then no turn). Goals stay where the scenario puts them."""
     faults: list[Fault] = field(default_factory=list)
     """Faults the world and its sensing inject (stafpipe.faults: stuck, silent, drop, dropout), the same for every
     method; e.g. `world.faults=[{kind: stuck, robot: 3, start: 8}]` (docs/faults.md, `stafpipe run faults`)."""
@@ -57,6 +61,9 @@ class WorldConfig:
         require(self.substeps >= 1, f"{key}.substeps", "must be >= 1", self.substeps)
         require(self.collision_slop >= 0, f"{key}.collision_slop", "must be >= 0", self.collision_slop)
         require(self.start_noise >= 0, f"{key}.start_noise", "must be >= 0", self.start_noise)
+        require(
+            0 <= self.heading_spread_deg <= 180, f"{key}.heading_spread_deg", "must be in [0, 180]", self.heading_spread_deg
+        )
         for k, fault in enumerate(self.faults):
             fault.check(f"{key}.faults[{k}]")
 
@@ -182,6 +189,26 @@ def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
     return out
 
 
+def _clear_jitter(start: np.ndarray, jitter: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """The jitter, zeroed for every robot whose perturbed start would touch an obstacle or a robot (so the perturbation
+    never makes a start invalid that was valid unperturbed). Robots are released one conflict at a time, so the result
+    depends only on the draw."""
+    r = scenario.spec.robot.radius
+    jitter = jitter.copy()
+    if not jitter.any():
+        return jitter
+    blocked = obstacle_distance(start + jitter, scenario) <= r
+    jitter[blocked] = 0.0
+    while True:
+        pos = start + jitter
+        gap = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.eye(len(pos)) * 1e9
+        moved = jitter.any(axis=1)
+        touching = (gap <= 2 * r).any(axis=1) & moved
+        if not touching.any():
+            return jitter
+        jitter[int(np.flatnonzero(touching)[0])] = 0.0
+
+
 class Worlds:
     """B independent worlds of the same team size; `Worlds([scenario])` is one world."""
 
@@ -246,7 +273,8 @@ class Worlds:
             jitter = np.clip(
                 rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise
             )
-            self.pos[w] = place(slots, np.asarray(team.start), h) + jitter
+            start = self._turned_start(w, place(slots, np.asarray(team.start), h), seed)
+            self.pos[w] = start + _clear_jitter(start, jitter, sc)
             self.goal[w] = place(slots, np.asarray(team.goal), h)
             self.vel[w] = 0.0
             self.heading[w] = h
@@ -264,6 +292,21 @@ class Worlds:
         self._update_movers()
         self.fault_events = transitions(self.faults, -1.0, 0.0)
         return self.observe()
+
+    def _turned_start(self, w: int, start: np.ndarray, seed: int) -> np.ndarray:
+        """The start slots turned about their centre by the episode's draw from +-`heading_spread_deg` (its own random
+        stream, so that a spread of 0 leaves every other draw as it was)."""
+        if self.cfg.heading_spread_deg <= 0:
+            return start
+        rng, spread, sc = np.random.default_rng([seed, 2]), math.radians(self.cfg.heading_spread_deg), self.scenarios[w]
+        centre = start.mean(axis=0)
+        for _ in range(10):
+            a = rng.uniform(-spread, spread)
+            turn = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+            turned = centre + (start - centre) @ turn.T
+            if (obstacle_distance(turned, sc) > sc.spec.robot.radius).all():
+                return turned
+        return start
 
     def _update_movers(self) -> None:
         for w, (first, specs) in enumerate(self._mover_slots):
