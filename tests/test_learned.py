@@ -123,9 +123,7 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
         return float(np.abs(got - want).mean())
 
     before = error()
-    stats = ppo.imitate(
-        policy, adapter, lambda rng, k: [(sc, path, ctx.passage_width)] * k, near, exact, tc, seed=0
-    )
+    stats = ppo.imitate(policy, adapter, lambda rng, k: [(sc, path, ctx.passage_width)] * k, near, exact, tc, seed=0)
     assert stats["imitation/samples"] == 2 * 30 * 10
     assert error() < min(0.1, before / 4)  # the network now does roughly what the teacher does
 

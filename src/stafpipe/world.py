@@ -49,7 +49,8 @@ class WorldConfig:
     whose perturbed start would touch an obstacle or another robot starts on its slot (docs/decisions.md)."""
     heading_spread_deg: float = 0.0
     """Each episode turns the start formation about its centre by an angle drawn uniformly from +-this (degrees); a
-    draw that puts a robot on an obstacle is redrawn (10 tries, then no turn). Goals stay where the scenario puts them."""
+    draw that puts a robot on an obstacle is redrawn (10 tries, then no turn). Goals stay where the scenario has
+    them."""
     faults: list[Fault] = field(default_factory=list)
     """Faults the world and its sensing inject (stafpipe.faults: stuck, silent, drop, dropout), the same for every
     method; e.g. `world.faults=[{kind: stuck, robot: 3, start: 8}]` (docs/faults.md, `stafpipe run faults`)."""
@@ -61,9 +62,8 @@ class WorldConfig:
         require(self.substeps >= 1, f"{key}.substeps", "must be >= 1", self.substeps)
         require(self.collision_slop >= 0, f"{key}.collision_slop", "must be >= 0", self.collision_slop)
         require(self.start_noise >= 0, f"{key}.start_noise", "must be >= 0", self.start_noise)
-        require(
-            0 <= self.heading_spread_deg <= 180, f"{key}.heading_spread_deg", "must be in [0, 180]", self.heading_spread_deg
-        )
+        spread = self.heading_spread_deg
+        require(0 <= spread <= 180, f"{key}.heading_spread_deg", "must be in [0, 180]", spread)
         for k, fault in enumerate(self.faults):
             fault.check(f"{key}.faults[{k}]")
 
