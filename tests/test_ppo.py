@@ -219,12 +219,14 @@ def test_the_shipped_weights_are_the_best_on_held_out_maps(workdir) -> None:
 
     from stafpipe.learning.ppo import best_iteration
 
-    words = [*TINY, "train_ppo.iterations=3", "train_ppo.eval_every=1", "train_ppo.validation=[doorway]",
-             "train_ppo.validation_episodes=3", "train_ppo.formations=[circle]"]  # fmt: skip
+    words = [*TINY, "train_ppo.iterations=3", "train_ppo.eval_every=1", "train_ppo.imitation.epochs=1",
+             "train_ppo.imitation.rollouts=1", "train_ppo.validation=[doorway]", "train_ppo.validation_episodes=3",
+             "train_ppo.formations=[circle]"]  # fmt: skip
     assert launch("train-ppo", words) == 0
     [run] = job_dirs(workdir)
     curves = pd.read_parquet(run / "learning_curves.parquet")
     assert curves["val/success_rate"].notna().all() and curves["val/collisions_per_episode"].notna().all()
+    assert 0 <= curves["imitation/val_success_rate"][0] <= 1  # the warm start judged too: a candidate (iteration 0)
     chosen = best_iteration(curves.to_dict("records"))
     policy, made_by = load_policy(run / "policy.pt", "dgnn")
     assert made_by["selected_iteration"] == chosen and made_by["validation_maps"] == ["doorway"]
@@ -246,3 +248,15 @@ def test_curriculum_variants_that_do_not_fit_their_map_are_left_out() -> None:
     assert [s.spec.team.formation for s in kept] == ["circle"]
     with pytest.raises(StafpipeError, match="no scenario fits its team"):
         curriculum([narrow], "formation", ["line"], "train_ppo.scenarios")
+
+
+def test_the_warm_started_network_is_a_candidate_for_the_shipped_weights() -> None:
+    from stafpipe.learning.ppo import best_iteration
+
+    scores = ((1, 0.8), (2, 0.9))
+    rows = [{"iteration": k, "val/success_rate": sr, "val/collisions_per_episode": 0.5} for k, sr in scores]
+    assert best_iteration(rows) == 2
+    warm = {"imitation/val_success_rate": 0.95, "imitation/val_collisions_per_episode": 0.0}
+    assert best_iteration([{**rows[0], **warm}, rows[1]]) == 0  # better than every PPO iteration: kept
+    worse = {"imitation/val_success_rate": 0.9, "imitation/val_collisions_per_episode": 1.0}
+    assert best_iteration([{**rows[0], **worse}, rows[1]]) == 2  # same SR, more contacts: the iteration wins

@@ -241,7 +241,11 @@ def train_ppo(
     gen = torch.Generator().manual_seed(seed)
     if resume_from is None and tc.imitation.epochs > 0:
         warm = imitate(policy, adapter, draw_scenarios, world_cfg, sensing, tc, seed)
-        _save(out_dir, config_hash, 0, policy, opt, gen, [], warm)  # a kill after the warm start does not redo it
+        if validation:  # the warm-started network is a candidate too (iteration 0): PPO may not improve on it
+            judged = validate(policy, adapter, validation, world_cfg, sensing, tc, tolerance)
+            warm.update({f"imitation/{k.replace('/', '_')}": v for k, v in judged.items()})
+            best = {"iteration": 0, "policy": copy.deepcopy(policy.state_dict())}
+        _save(out_dir, config_hash, 0, policy, opt, gen, [], warm, best)  # a kill after the warm start: not redone
     if resume_from is not None:
         state = torch.load(resume_from, map_location="cpu", weights_only=True)
         policy.load_state_dict(state["policy"])
@@ -325,8 +329,13 @@ def validate(
 
 def best_iteration(history: list[dict[str, float]]) -> int | None:
     """The iteration whose weights are shipped: the highest validation success rate, then the fewest collisions,
-    then the earliest; None without validation rows."""
+    then the earliest; 0 is the warm-started network (judged before the first iteration, its numbers in the first
+    row as `imitation/val_*`); None without validation rows."""
     rows = [r for r in history if "val/success_rate" in r]
+    if history and "imitation/val_success_rate" in history[0]:
+        first = history[0]
+        sr, hits = first["imitation/val_success_rate"], first["imitation/val_collisions_per_episode"]
+        rows.insert(0, {"iteration": 0, "val/success_rate": sr, "val/collisions_per_episode": hits})
     if not rows:
         return None
     top = max(rows, key=lambda r: (r["val/success_rate"], -r["val/collisions_per_episode"], -r["iteration"]))

@@ -203,7 +203,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         "iterations": len(history),
         "final": history[-1] if history else {},
         "validation_maps": sorted({d[0].name for batch in validation for d in batch}),
-        "selected_iteration": best_iteration(history) or len(history),
+        "selected_iteration": len(history) if (chosen := best_iteration(history)) is None else chosen,
     }
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
     outputs += sorted((out_dir / TB_DIR).iterdir())
