@@ -191,8 +191,8 @@ def _build_space(scenario: Scenario, n: int, cfg: WorldConfig) -> _Space:
 
 def _clear_jitter(start: np.ndarray, jitter: np.ndarray, scenario: Scenario) -> np.ndarray:
     """The jitter, zeroed for every robot whose perturbed start would touch an obstacle or a robot (so the perturbation
-    never makes a start invalid that was valid unperturbed). Robots are released one conflict at a time, so the result
-    depends only on the draw."""
+    never makes a start invalid that was valid unperturbed); repeated until no perturbed robot touches anything, so
+    the result depends only on the draw."""
     r = scenario.spec.robot.radius
     jitter = jitter.copy()
     if not jitter.any():
@@ -206,7 +206,7 @@ def _clear_jitter(start: np.ndarray, jitter: np.ndarray, scenario: Scenario) -> 
         touching = (gap <= 2 * r).any(axis=1) & moved
         if not touching.any():
             return jitter
-        jitter[int(np.flatnonzero(touching)[0])] = 0.0
+        jitter[touching] = 0.0
 
 
 class Worlds:
