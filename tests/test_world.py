@@ -127,6 +127,7 @@ def test_heading_spread_turns_the_start_formation_and_nothing_else() -> None:
     assert np.allclose(dist(a), dist(b)) and np.abs(a - b).max() > 0.05
     angle = np.degrees(np.arctan2(*(b[0] - b.mean(0))[::-1]) - np.arctan2(*(a[0] - a.mean(0))[::-1]))
     assert 0 < abs((angle + 180) % 360 - 180) <= 30
+    assert np.allclose(np.degrees(turned.heading[0] - plain.heading[0]), (angle + 180) % 360 - 180)  # facing the turn
     # the spread has its own random stream: with it at 0 the perturbation is what it was
     noisy, noisy_spread0 = (Worlds([sc], cfg=WorldConfig(heading_spread_deg=s)) for s in (0.0, 0.0))
     noisy.reset([3])

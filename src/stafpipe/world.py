@@ -273,11 +273,11 @@ class Worlds:
             jitter = np.clip(
                 rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise
             )
-            start = self._turned_start(w, place(slots, np.asarray(team.start), h), seed)
+            start, turn = self._turned_start(w, place(slots, np.asarray(team.start), h), seed)
             self.pos[w] = start + _clear_jitter(start, jitter, sc)
             self.goal[w] = place(slots, np.asarray(team.goal), h)
             self.vel[w] = 0.0
-            self.heading[w] = h
+            self.heading[w] = h + turn  # a turned team faces the turned way (differential drive)
             self.time[w] = 0.0
             self.collided[w] = False
             sp = self.spaces[w]
@@ -293,11 +293,11 @@ class Worlds:
         self.fault_events = transitions(self.faults, -1.0, 0.0)
         return self.observe()
 
-    def _turned_start(self, w: int, start: np.ndarray, seed: int) -> np.ndarray:
+    def _turned_start(self, w: int, start: np.ndarray, seed: int) -> tuple[np.ndarray, float]:
         """The start slots turned about their centre by the episode's draw from +-`heading_spread_deg` (its own random
-        stream, so that a spread of 0 leaves every other draw as it was)."""
+        stream, so that a spread of 0 leaves every other draw as it was), and the angle (rad)."""
         if self.cfg.heading_spread_deg <= 0:
-            return start
+            return start, 0.0
         rng, spread, sc = np.random.default_rng([seed, 2]), math.radians(self.cfg.heading_spread_deg), self.scenarios[w]
         centre = start.mean(axis=0)
         for _ in range(10):
@@ -305,8 +305,8 @@ class Worlds:
             turn = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
             turned = centre + (start - centre) @ turn.T
             if (obstacle_distance(turned, sc) > sc.spec.robot.radius).all():
-                return turned
-        return start
+                return turned, a
+        return start, 0.0
 
     def _update_movers(self) -> None:
         for w, (first, specs) in enumerate(self._mover_slots):
