@@ -128,11 +128,13 @@ def test_heading_spread_turns_the_start_formation_and_nothing_else() -> None:
     angle = np.degrees(np.arctan2(*(b[0] - b.mean(0))[::-1]) - np.arctan2(*(a[0] - a.mean(0))[::-1]))
     assert 0 < abs((angle + 180) % 360 - 180) <= 30
     assert np.allclose(np.degrees(turned.heading[0] - plain.heading[0]), (angle + 180) % 360 - 180)  # facing the turn
-    # the spread has its own random stream: with it at 0 the perturbation is what it was
-    noisy, noisy_spread0 = (Worlds([sc], cfg=WorldConfig(heading_spread_deg=s)) for s in (0.0, 0.0))
-    noisy.reset([3])
-    noisy_spread0.reset([3])
-    assert np.array_equal(noisy.pos, noisy_spread0.pos)
+    # the spread draws from its own random stream: each robot's start perturbation is the same with or without it
+    # and so is the sensing noise on the first observation
+    noisy, noisy_turned = (Worlds([sc], cfg=WorldConfig(heading_spread_deg=s)) for s in (0.0, 30.0))
+    seen, seen_turned = noisy.reset([3]), noisy_turned.reset([3])
+    jitter = noisy.pos[0] - a
+    assert np.abs(jitter).max() > 0.01 and np.allclose(noisy_turned.pos[0] - b, jitter)
+    assert np.allclose(seen.position - noisy.pos, seen_turned.position - noisy_turned.pos)
 
 
 def test_episodes_differ_by_default() -> None:
