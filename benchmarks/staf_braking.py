@@ -17,16 +17,20 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from stafpipe.config.schema import EvalConfig
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.controllers.staf import StafController, StafMethodConfig
 from stafpipe.episode import episode_context
 from stafpipe.geometry import Geometry
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import teacher_actions
+from stafpipe.metrics import matched_goal_distance
 from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
 from stafpipe.sensing import Observation, SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
+
+EVAL = EvalConfig()  # the evaluation's defaults: goal tolerance and CFI margin
 
 
 def scenarios(names: list[str]) -> list[Scenario]:
@@ -50,8 +54,8 @@ def approach(command: np.ndarray, towards: np.ndarray) -> np.ndarray:
 
 def count(sc: Scenario, ctrl: StafController, episodes: int, near: float, excess: float) -> tuple[int, ...]:
     sensing = SensingConfig()
-    ctx, path = episode_context(sc, Geometry(sc), sensing, 0.3, 0.1)
-    r, top = sc.spec.robot.radius, sc.spec.robot.max_speed
+    ctx, path = episode_context(sc, Geometry(sc), sensing, EVAL.goal_tolerance, EVAL.cfi_margin)
+    r, top, gain = sc.spec.robot.radius, sc.spec.robot.max_speed, ctrl.cfg.proportional_gain
     wall = wall_under = robots = robots_under = contacts = 0
     for episode in range(episodes):
         worlds = Worlds([sc], sensing)
@@ -61,24 +65,21 @@ def count(sc: Scenario, ctrl: StafController, episodes: int, near: float, excess
             net = ctrl.act(obs)
             batch = Observation(*(np.asarray(x)[None] for x in obs))
             aim = (ctrl.targets - obs.position)[None]
-            teacher = commands(teacher_actions("avoiding", aim, batch, r, top, 2.0), batch.heading, top)[0]
+            teacher = commands(teacher_actions("avoiding", aim, batch, r, top, gain), batch.heading, top)[0]
             to_wall = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=1, keepdims=True), 1e-9)
             close = obs.obstacle_distance < near
             faster = approach(net, to_wall) - approach(teacher, to_wall) > excess
             wall, wall_under = wall + int(close.sum()), wall_under + int((close & faster).sum())
-            rel = obs.position[None] - obs.position[:, None]  # [i, j] = p_j - p_i
-            dist = np.linalg.norm(rel, axis=-1) + np.eye(len(net)) * 1e9
-            nearest = dist.argmin(axis=1)
-            to_robot = rel[np.arange(len(net)), nearest] / dist.min(axis=1)[:, None]
+            dist = np.linalg.norm(obs.rel_position, axis=-1) + np.eye(len(net)) * 1e9  # [i, j]: p_j - p_i
+            to_robot = obs.rel_position[np.arange(len(net)), dist.argmin(axis=1)] / dist.min(axis=1)[:, None]
             close = dist.min(axis=1) - 2 * r < near
             faster = approach(net, to_robot) - approach(teacher, to_robot) > excess
             robots, robots_under = robots + int(close.sum()), robots_under + int((close & faster).sum())
             step, events = worlds.step(net[None])
             contacts += len(events[0])
             obs = step.world(0)
-            to_slots = np.linalg.norm(worlds.pos[0][:, None] - worlds.goal[0][None], axis=-1)
-            if (to_slots.min(axis=1) < 0.3).all() and len(set(to_slots.argmin(axis=1).tolist())) == len(net):
-                break  # every goal slot taken (as the harness' success)
+            if (matched_goal_distance(worlds.pos[0], worlds.goal[0]) < EVAL.goal_tolerance).all():
+                break  # every goal slot taken: the harness' success
     return wall, wall_under, robots, robots_under, contacts
 
 
