@@ -273,7 +273,7 @@ class Worlds:
             jitter = np.clip(
                 rng.normal(0.0, self.cfg.start_noise, (self.n, 2)), -2 * self.cfg.start_noise, 2 * self.cfg.start_noise
             )
-            start, turn = self._turned_start(w, place(slots, np.asarray(team.start), h), seed)
+            start, turn = self._turned_start(sc, place(slots, np.asarray(team.start), h), seed)
             self.pos[w] = start + _clear_jitter(start, jitter, sc)
             self.goal[w] = place(slots, np.asarray(team.goal), h)
             self.vel[w] = 0.0
@@ -293,12 +293,12 @@ class Worlds:
         self.fault_events = transitions(self.faults, -1.0, 0.0)
         return self.observe()
 
-    def _turned_start(self, w: int, start: np.ndarray, seed: int) -> tuple[np.ndarray, float]:
+    def _turned_start(self, sc: Scenario, start: np.ndarray, seed: int) -> tuple[np.ndarray, float]:
         """The start slots turned about their centre by the episode's draw from +-`heading_spread_deg` (its own random
         stream, so that a spread of 0 leaves every other draw as it was), and the angle (rad)."""
         if self.cfg.heading_spread_deg <= 0:
             return start, 0.0
-        rng, spread, sc = np.random.default_rng([seed, 2]), math.radians(self.cfg.heading_spread_deg), self.scenarios[w]
+        rng, spread = np.random.default_rng([seed, 2]), math.radians(self.cfg.heading_spread_deg)
         centre = start.mean(axis=0)
         for _ in range(10):
             a = rng.uniform(-spread, spread)
