@@ -18,8 +18,9 @@ import time
 import numpy as np
 import torch
 
+from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.staf import StafController, StafMethodConfig
-from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
+from stafpipe.controllers.staf_plan import StafPlan
 from stafpipe.episode import episode_context
 from stafpipe.geometry import Geometry
 from stafpipe.highlevel.infer import divider

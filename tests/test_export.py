@@ -33,7 +33,7 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
     scenario = build_scenario(dataclasses.replace(base.spec, team=dataclasses.replace(base.spec.team, n=n)))
     policy, made_by = load_policy("", method)
     plan = made_by.get("train_ppo", {}).get("plan")
-    from stafpipe.controllers.staf_plan import PlanConfig
+    from stafpipe.controllers.plan_config import PlanConfig
 
     adapter = ADAPTERS[method](policy.cfg, RewardConfig(), PlanConfig(**plan) if plan else PlanConfig(), 2.0)
     world_cfg = WorldConfig()

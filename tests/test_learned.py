@@ -16,8 +16,8 @@ import stafpipe.stages.train_ppo as train_stage
 from conftest import job_dirs
 from stafpipe.controllers import make_controller
 from stafpipe.controllers.base import TeamInfo
+from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.staf import StafMethodConfig
-from stafpipe.controllers.staf_plan import PlanConfig
 from stafpipe.episode import episode_context
 from stafpipe.geometry import Geometry
 from stafpipe.launch import launch

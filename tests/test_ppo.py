@@ -211,6 +211,59 @@ def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) ->
     assert (plain == 1.0).all()
 
 
+def test_wall_copies_add_relabelled_near_wall_states(tmp_path) -> None:
+    """`imitation.wall_copies=1`: each collected step gets a copy whose robots all have a wall point 0-0.4 m from
+    their surface, at a random bearing, labelled with the teacher's (braking) action on that copy; the real samples
+    are those of a run without copies."""
+    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.config import RewardConfig
+    from stafpipe.learning.ppo import _teacher_samples
+    from stafpipe.learning.teachers import NEAR_WALL_GAP
+
+    im = ImitationConfig(epochs=1, teacher="avoiding", noise=0.0, wall_copies=1.0)
+    tc = TrainPPOConfig(method="staf", worlds=1, episode_steps=20, policy=PolicyConfig(hidden=16), imitation=im)
+    corridor = load_named_scenario("corridor")
+    adapter = ADAPTERS["staf"](tc.policy, RewardConfig(), None, 2.0)
+    drawn = [(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)]
+    own, _edge, _mask, label, _w = _teacher_samples(
+        None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0)
+    )
+    tc.imitation.wall_copies = 0.0
+    plain = _teacher_samples(None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0))
+    assert len(own) == 2 * len(plain[0])
+    real, copy = own[0::2], own[1::2]  # each step's own samples, then its copy
+    assert torch.equal(real, plain[0]) and torch.equal(label[0::2], plain[3])
+    wall = torch.linalg.norm(copy[..., 4:6].double(), dim=-1) - corridor.spec.robot.radius
+    assert wall.min() >= -1e-6 and wall.max() <= NEAR_WALL_GAP + 1e-6
+    # the teacher brakes on some copies (a wall ahead), so their labels differ from the free step towards the target
+    braked = torch.linalg.norm(label[1::2] - label[0::2], dim=-1) > 1e-3
+    assert braked.float().mean() > 0.1
+
+
+def test_neighbour_copies_move_each_robots_nearest_neighbour_close_in_its_own_view() -> None:
+    """`imitation.neighbour_copies`: in robot i's view (row i) its nearest sensed neighbour is moved to 0-0.4 m from
+    its surface; nothing else changes, and a robot that senses no one keeps its view."""
+    from stafpipe.learning.teachers import NEAR_WALL_GAP, near_neighbour_copy
+    from stafpipe.sensing import Observation
+
+    rng = np.random.default_rng(0)
+    b, n, radius = 2, 4, 0.2
+    pos = rng.uniform(0.0, 3.0, (b, n, 2))
+    sensed = np.broadcast_to(~np.eye(n, dtype=bool), (b, n, n)).copy()
+    sensed[1, 2, :] = False  # robot 2 of world 1 senses no one
+    z = np.zeros
+    rel = pos[:, None] - pos[:, :, None]
+    obs = Observation(pos, z((b, n, 2)), z((b, n)), z((b, n, 2)), z((b, n, 2)), z((b, n)), sensed, rel,
+                      z((b, n, n, 2)), z(b), z((b, 0, 4)), sensed)  # fmt: skip
+    moved = near_neighbour_copy(obs, radius, rng)
+    changed = (moved.rel_position != rel).any(-1)
+    assert changed.sum(-1).tolist() == [[1, 1, 1, 1], [1, 1, 0, 1]]
+    nearest = np.where(sensed, np.linalg.norm(rel, axis=-1), np.inf).argmin(-1)
+    assert (changed.argmax(-1) == nearest)[sensed.any(-1)].all()
+    gap = np.linalg.norm(moved.rel_position[changed], axis=-1) - 2 * radius
+    assert gap.min() >= 0 and gap.max() <= NEAR_WALL_GAP
+
+
 @pytest.mark.slow
 def test_the_shipped_weights_are_the_best_on_held_out_maps(workdir) -> None:
     """With train_ppo.validation, policy.pt holds the weights of the iteration with the best validation success

@@ -13,11 +13,10 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
+from staf_plans import ideal_run, scenario_with, start_and_plan
+from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.plan_geometry import blocked_ways
-from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
-from stafpipe.episode import centred_path, episode_context
-from stafpipe.formations import place
-from stafpipe.geometry import Geometry, obstacle_distance
+from stafpipe.controllers.staf_plan import StafPlan
 from stafpipe.highlevel.infer import divider
 from stafpipe.integrity import formation_integrity
 from stafpipe.learning.adapters import staf_penalties
@@ -31,50 +30,6 @@ from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 
-def _scenario(name: str, kind: str, n: int | None = None):
-    sc = load_named_scenario(name)
-    team = dataclasses.replace(sc.spec.team, formation=kind, n=n or sc.spec.team.n)
-    return build_scenario(dataclasses.replace(sc.spec, team=team))
-
-
-def _start_and_plan(sc, divide, plan_cfg: PlanConfig) -> tuple[np.ndarray, StafPlan]:
-    """The team's start positions and a plan for it from its start to its goal along the centred path."""
-    geometry = Geometry(sc)
-    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
-    t = sc.spec.team
-    pos = place(sc.template(), t.start, math.radians(t.heading_deg))
-    goal = place(sc.template(), t.goal, math.radians(t.heading_deg))
-    path = centred_path(sc, geometry, ctx.passage_width)
-    return pos, StafPlan(plan_cfg, sc, sc.template(), goal, path, ctx.passage_width, divide)
-
-
-def _ideal_run(sc, divide, steps: int = 1500, plan_cfg: PlanConfig | None = None):
-    """Robots that move straight to their plan targets at the robot's max speed: the plan alone, no policy."""
-    geometry = Geometry(sc)
-    ctx, _ = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
-    path = centred_path(sc, geometry, ctx.passage_width)
-    t, v = sc.spec.team, sc.spec.robot.max_speed
-    pos, goal = (
-        place(sc.template(), t.start, math.radians(t.heading_deg)),
-        place(sc.template(), t.goal, math.radians(t.heading_deg)),
-    )
-    plan = StafPlan(plan_cfg or PlanConfig(), sc, sc.template(), goal, path, ctx.passage_width, divide)
-    log = {"events": [], "min_gap": np.inf, "min_wall": np.inf, "labels": [], "progress": []}
-    for k in range(steps):
-        target = plan.step(pos, 0.1)
-        log["labels"].append(plan.labels.copy())
-        log["progress"].append(plan.frame.progress(pos))
-        log["events"] += [e[0] for e in plan.drain_events()]
-        d = target - pos
-        pos = pos + d * np.minimum(1.0, 0.1 * v / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9))
-        gaps = np.linalg.norm(pos[:, None] - pos[None], axis=-1) + np.eye(len(pos)) * 9
-        log["min_gap"] = min(log["min_gap"], gaps.min() - 2 * sc.spec.robot.radius)
-        log["min_wall"] = min(log["min_wall"], (obstacle_distance(pos, sc) - sc.spec.robot.radius).min())
-        if np.linalg.norm(pos - plan.goal, axis=1).max() < 0.05:
-            return k * 0.1, log, ctx
-    return math.inf, log, ctx
-
-
 @pytest.fixture(scope="module")
 def divide():
     return divider()
@@ -86,7 +41,7 @@ def divide():
 def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m, balance) -> None:
     """m=auto with the geometric shrink (the comparison plan): targets alone keep robots apart and off the walls."""
     plan_cfg = PlanConfig(m="auto", adapt="geometric", balance=balance)
-    tt, log, ctx = _ideal_run(_scenario("corridor", kind), divide, plan_cfg=plan_cfg)
+    tt, log, ctx = ideal_run(scenario_with("corridor", kind), divide, plan_cfg=plan_cfg)
     assert log["events"] == ["split", "regroup"]
     assert tt < 1.45 * ctx.travel_time_lower_bound  # the plan itself stays within the TT target (1.5 x the bound)
     assert log["min_gap"] > 0.05 and log["min_wall"] > 0.1  # targets keep robots apart and off the walls
@@ -109,11 +64,11 @@ def test_plan_splits_passes_one_after_another_and_regroups(divide, kind, m, bala
 def test_waiting_subteams_hold_their_own_formation(divide, kind) -> None:
     """At the split, the subteams behind the first wait where they are, in the formation type with their own robots
     (targets of a perfect k-robot formation at the team's spacing, facing along the path)."""
-    sc = _scenario("corridor", kind)
+    sc = scenario_with("corridor", kind)
     t = sc.spec.team
     # the path starts at the team's centre; clipped there (extend_path=false), the rear robots all stand at progress
     # 0 and their subteam waits; on the extended path they stand far enough behind to follow at once
-    pos, plan = _start_and_plan(sc, divide, PlanConfig(split_distance=100.0, extend_path=False))
+    pos, plan = start_and_plan(sc, divide, PlanConfig(split_distance=100.0, extend_path=False))
     target = plan.step(pos, 0.1)
     assert len(plan.order) > 1
     # the targets slide from the robots into the new slots: no target jumps more than a step at top speed
@@ -130,9 +85,9 @@ def test_regroup_slides_targets_home_together(divide) -> None:
     """At the regroup the robots that start home together have targets sliding on straight lines to their goal slots
     (`home_approach=0`; the two-leg way is tested below), the same fraction of the way for all, the farthest target
     moving at the robot's top speed."""
-    sc = _scenario("corridor", "wedge")
+    sc = scenario_with("corridor", "wedge")
     v = sc.spec.robot.max_speed
-    pos, plan = _start_and_plan(sc, divide, PlanConfig(home_approach=0.0))
+    pos, plan = start_and_plan(sc, divide, PlanConfig(home_approach=0.0))
     seen, previous = 0, None
     for _ in range(1500):
         target = plan.step(pos, 0.1).copy()
@@ -157,7 +112,7 @@ def test_plan_regroups_where_the_goal_area_is_close_to_the_narrow_part(divide, n
     """narrowing: the front subteam reaches the goal before the last one is out; multi_passage: two passages off
     each other's axis. Robots still inside keep following their subteam, the others take their goal slots."""
     sc = load_named_scenario(name)
-    tt, log, _ctx = _ideal_run(sc, divide, plan_cfg=PlanConfig(m="auto", adapt="geometric"))
+    tt, log, _ctx = ideal_run(sc, divide, plan_cfg=PlanConfig(m="auto", adapt="geometric"))
     assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
     assert log["min_wall"] > 0.05 and log["min_gap"] > 0.0
 
@@ -166,15 +121,15 @@ def test_plan_regroups_where_the_goal_area_is_close_to_the_narrow_part(divide, n
 def test_default_plan_gives_two_subteams(divide, kind) -> None:
     """The paper's setup (STAF Table 1, Fig. 4): two subteams, each in the team's formation type, passing one after
     the other; the default (geometric) adaptation keeps every target off the walls, the nominal spacing does not."""
-    sc = _scenario("corridor", kind)
-    tt, log, _ctx = _ideal_run(sc, divide)
+    sc = scenario_with("corridor", kind)
+    tt, log, _ctx = ideal_run(sc, divide)
     assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
     split = next(k for k, lab in enumerate(log["labels"]) if lab.max() > 0)
     assert log["labels"][split].max() == 1  # two subteams
     assert log["min_wall"] > 0.0
     if kind == "wedge":  # a 5-robot wedge at 1 m spacing does not fit 2.4 m: at nominal spacing the policy must adapt
-        _, shrunk, _ = _ideal_run(sc, divide, plan_cfg=PlanConfig(balance=True))  # subteams of five (the cut: 7-3)
-        _, nominal, _ = _ideal_run(sc, divide, plan_cfg=PlanConfig(adapt="nominal", balance=True))
+        _, shrunk, _ = ideal_run(sc, divide, plan_cfg=PlanConfig(balance=True))  # subteams of five (the cut: 7-3)
+        _, nominal, _ = ideal_run(sc, divide, plan_cfg=PlanConfig(adapt="nominal", balance=True))
         assert shrunk["min_wall"] > 0.0 > nominal["min_wall"]
 
 
@@ -182,17 +137,17 @@ def test_default_plan_gives_two_subteams(divide, kind) -> None:
 def test_single_file_where_two_abreast_do_not_fit(divide) -> None:
     """Bollards 1.1 m apart: the plan turns each subteam into a column through a gap, so the targets alone pass the row
     without touching a bollard or each other."""
-    tt, log, _ctx = _ideal_run(load_named_scenario("bollards"), divide)
+    tt, log, _ctx = ideal_run(load_named_scenario("bollards"), divide)
     assert log["events"] == ["split", "regroup"] and math.isfinite(tt)
     assert log["min_wall"] > 0.0 and log["min_gap"] > 0.0
-    _off, log_off, _ = _ideal_run(load_named_scenario("bollards"), divide, plan_cfg=PlanConfig(single_file=False))
+    _off, log_off, _ = ideal_run(load_named_scenario("bollards"), divide, plan_cfg=PlanConfig(single_file=False))
     assert log_off["min_wall"] < 0.0  # without the column, slots at the team's spacing hit the bollards
 
 
 def test_plan_does_not_split_where_the_team_fits(divide) -> None:
     sc = load_named_scenario("corridor")
     open_world = build_scenario(dataclasses.replace(sc.spec, obstacles=[]))
-    tt, log, ctx = _ideal_run(open_world, divide)
+    tt, log, ctx = ideal_run(open_world, divide)
     assert log["events"] == [] and max(lab.max() for lab in log["labels"]) == 0
     assert tt < 1.3 * ctx.travel_time_lower_bound  # the anchor moves at plan.speed = 0.8 of max speed
 
@@ -220,7 +175,7 @@ def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
 
 
 def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:
-    sc = _scenario("corridor", "circle", 4)
+    sc = scenario_with("corridor", "circle", 4)
     worlds = Worlds([sc], SensingConfig(radius=3.0, position_noise=0.0))  # exact: features compared with positions
     obs = worlds.reset([0]).world(0)
     target = obs.position + np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.5, 0.5]])
@@ -237,7 +192,7 @@ def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:
 
 
 def test_spring_damper_term_matches_a_hand_computed_case() -> None:
-    sc = _scenario("corridor", "line", 3)
+    sc = scenario_with("corridor", "line", 3)
     worlds = Worlds([sc], SensingConfig())
     obs = worlds.reset([0])
     worlds.pos[0] = [[5.0, 6.0], [5.0, 7.5], [5.0, 9.0]]

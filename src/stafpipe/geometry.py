@@ -180,13 +180,17 @@ class Geometry:
         pts[0], pts[-1] = start, goal
         return self._pull_string(pts, clearance)
 
-    def _visible(self, p: np.ndarray, q: np.ndarray, clearance: float) -> bool:
+    def clearance(self, points: np.ndarray) -> np.ndarray:
+        """Clearance (..) of points (.., 2) read from the grid (the nearest cell; outside the world: the edge cell)."""
         xs, ys, clear = self.grid
+        j = np.clip(np.rint((points[..., 0] - xs[0]) / self.resolution).astype(int), 0, len(xs) - 1)
+        i = np.clip(np.rint((points[..., 1] - ys[0]) / self.resolution).astype(int), 0, len(ys) - 1)
+        return clear[i, j]
+
+    def _visible(self, p: np.ndarray, q: np.ndarray, clearance: float) -> bool:
         k = max(2, int(np.linalg.norm(q - p) / (self.resolution / 2)) + 1)
         samples = p + np.linspace(0.0, 1.0, k)[:, None] * (q - p)
-        j = np.clip(np.rint((samples[:, 0] - xs[0]) / self.resolution).astype(int), 0, len(xs) - 1)
-        i = np.clip(np.rint((samples[:, 1] - ys[0]) / self.resolution).astype(int), 0, len(ys) - 1)
-        return bool((clear[i, j] >= clearance).all())
+        return bool((self.clearance(samples) >= clearance).all())
 
     def _pull_string(self, pts: np.ndarray, clearance: float) -> np.ndarray:
         out, anchor, j = [pts[0]], 0, 1

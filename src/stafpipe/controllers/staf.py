@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from stafpipe.controllers.learned import LearnedController
-from stafpipe.controllers.staf_plan import PlanConfig
+from stafpipe.controllers.plan_config import PlanConfig
 
 
 @dataclass

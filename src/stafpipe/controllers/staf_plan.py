@@ -16,93 +16,14 @@ in `method=staf`, so the policy is trained on exactly the targets it is executed
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from stafpipe.controllers import plan_geometry as geo
+from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, WAY_CLEARANCE, PlanConfig
 from stafpipe.controllers.plan_geometry import extent, lateral_clearance, separated, unit_slots
 from stafpipe.formations import assign_slots
 from stafpipe.geometry import PathFrame, obstacle_distance
-
-WAY_CLEARANCE = 0.05
-"""m between a body and the obstacles along every way home before a subteam starts home short of the taken slots
-(`StafPlan._clear_ways`); chosen, not tuned: a little more than the 0.02 m at which the trainer counts a touch."""
-
-
-@dataclass
-class PlanConfig:
-    """Execution settings of STAF's plan (part of `method=staf` and of `train_ppo.staf`)."""
-
-    m: str = "2"
-    """Subteams: a fixed number (2: STAF Table 1, Table 2 and Fig. 4 divide every team into two) or `auto` (our
-    extension: the smallest m whose subteams fit the narrowest passage at the smallest spacing, STAF Sec. 7)."""
-    adapt: str = "geometric"
-    """Formation adaptation in a narrow passage: `geometric` (the plan shrinks the subteam's spacing to the free width
-    ahead; what the shipped policy was trained on) or `nominal` (the plan keeps each subteam's formation at the
-    team's nominal spacing and the policy must deform it itself, as STAF Sec. 3 attributes to the intermediate GNN
-    under R^adp; measured worse, docs/staf.md "Learned adaptation")."""
-    single_file: bool = True
-    """Where a subteam's formation does not fit even at the smallest spacing (2r + min_gap; e.g. bollards 1.1 m
-    apart, or five robots abreast in 2.4 m), the plan turns its slots into a column along the path (blended in over
-    `file_ramp` metres); false keeps the formation's slots there too (docs/staf.md)."""
-    file_ramp: float = 2.0
-    """Distance (m) over which slots blend from the formation into the column before a single-file stretch and back
-    after it."""
-    safe_gap: float = 0.3
-    """Gap (m) between robot surfaces assumed when testing whether a subteam fits (as `high.safe_gap`)."""
-    min_gap: float = 0.2
-    """Smallest gap (m) between neighbouring robots' surfaces a shrunk formation may have."""
-    margin: float = 0.15
-    """Clearance (m) kept between a formation's outer robots and the walls."""
-    speed: float = 0.8
-    """Speed (m/s) of a subteam's anchor along the path (a fraction of max speed leaves room to catch up)."""
-    max_lead: float = 0.8
-    """The anchor waits when it is this far (m) ahead of its subteam's mean progress."""
-    follow_gap: float = 0.6
-    """Free space (m) between a subteam and the one ahead of it along the path."""
-    split_distance: float = 5.0
-    """The team splits when its progress is this close (m) to the first narrow part (at once if already closer)."""
-    balance: bool = False
-    """True: subteam sizes within one of each other (`highlevel.partition.balance_sizes`; the line's 3-1-3-3 becomes
-    3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
-    high_checkpoint: str = ""
-    """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
-    home: str = "departure"
-    """When the team's goal slots are given out: each time robots start for home (`departure`: the slots still free
-    go to every robot not yet home-bound, from where its target is then, min-sum-of-squares as in Turpin, Michael and
-    Kumar's CAPT, IJRR 2014), so robots arriving one by one do not cross each other's way; or once at the regroup
-    (`regroup`, from the robots' positions then; what the shipped policy was trained with). docs/staf.md."""
-    target_gap: float = 0.1
-    """> 0: targets of two robots closer than 2r + target_gap are pushed apart along the line joining them (a
-    split or regroup slide can bring them closer than the robots' diameter); 0: off (the shipped policy was trained
-    with 0). docs/staf.md."""
-    home_approach: float = 0.6
-    """> 0: after the regroup, a subteam behind the first stops `follow_gap` short of the goal slots already taken,
-    its robots then start for home, and a target more than this far behind its goal slot enters the slot from this
-    far straight behind it (along the way in), so that robots arriving later do not cut past or into robots already
-    seated; 0: as trained (later subteams follow the path to its end). docs/staf.md."""
-    extend_path: bool = True
-    """The path reaches back straight behind its start (`PathFrame(extend=True)`): slots the plan places
-    behind the start (a waiting subteam's, a column's rear) stay where they belong instead of all falling on the start
-    point, where they crowded robots that stood behind or beside it; false: clipped to the path, as trained."""
-    unblock: bool = True
-    """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
-    ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""
-
-    def check(self, key: str) -> None:
-        from stafpipe.errors import require
-
-        require(
-            self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4", self.m
-        )
-        require(self.adapt in ("geometric", "nominal"), f"{key}.adapt", "must be geometric or nominal", self.adapt)
-        for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
-            require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
-        require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
-        require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)
-        require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
-        require(self.home_approach >= 0, f"{key}.home_approach", "must be >= 0", self.home_approach)
 
 
 class StafPlan:
@@ -138,7 +59,8 @@ class StafPlan:
         from stafpipe.geometry import Geometry
 
         key = ("lateral_clearance", points.tobytes(), heading.tobytes())  # the same path every episode: once
-        self.clear = Geometry.of(scenario).remember(key, lambda: lateral_clearance(points, heading, scenario))
+        self.geometry = Geometry.of(scenario)
+        self.clear = self.geometry.remember(key, lambda: lateral_clearance(points, heading, scenario))
         self.full_slots = np.asarray(template, float)
         _, full_width = extent(self.full_slots, self.radius)
         narrow = 2 * (self.clear - cfg.margin) < full_width
@@ -202,8 +124,32 @@ class StafPlan:
         """Targets (n, 2) for robots at `pos` (n, 2) after one control step of `dt` seconds."""
         targets = self._step(pos, dt)
         if self.cfg.target_gap > 0:
-            return separated(targets, 2 * self.radius + self.cfg.target_gap)
+            targets = separated(targets, 2 * self.radius + self.cfg.target_gap)
+        if self.cfg.in_sight:
+            targets = self._in_sight(pos, targets)
         return targets
+
+    def _in_sight(self, pos: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """`targets`, each one the robot cannot see (its straight way passes within half a radius of an obstacle)
+        replaced by the path's point at the target's arc length, held within 1 m of the robot's own (the path keeps
+        clear of obstacles, so the robot goes round the wall along it)."""
+        way = targets - pos
+        length = np.linalg.norm(way, axis=1)
+        # a way inside the free disc around the robot is in sight: only the others are checked point by point (two
+        # grid cells of margin: the grid's nearest-cell error at both ends, so the result is the same as checking all)
+        blocked = self.geometry.clearance(pos) < length + self.radius / 2 + 2 * self.geometry.resolution
+        if not blocked.any():
+            return targets
+        k = int(min(200, max(2, length[blocked].max() / SIGHT_STEP + 1)))
+        samples = pos[blocked, None] + np.linspace(0.0, 1.0, k)[None, :, None] * way[blocked, None]
+        blocked[blocked] = (self.geometry.clearance(samples) < self.radius / 2).any(axis=1)
+        if not blocked.any():
+            return targets
+        own = self.frame.progress(pos[blocked])
+        s = np.clip(self.frame.progress(targets[blocked]), own - SIGHT_REACH, own + SIGHT_REACH)
+        out = targets.copy()
+        out[blocked] = self.frame.at(s)[0]
+        return out
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
         self.limits = {}
@@ -228,7 +174,7 @@ class StafPlan:
         self._place()
         self._slide_into_subteams(dt)
         if self.merging:  # robots that are through head for their goal slots; the others still follow their subteam
-            passed = passed | self._stopped_short()
+            passed = passed | self._stopped_short() | self._held_at_end(pos)
             self._start_home(passed, pos)
             self.labels[passed] = 0
             return self._home(dt)
@@ -439,6 +385,17 @@ class StafPlan:
         for j in range(1, len(self.order)):
             if self.hold[j] is None and self.anchor[j] >= self._short_of_taken(j) - 1e-6:
                 out[self.order[j]] = True
+        return out
+
+    def _held_at_end(self, pos: np.ndarray) -> np.ndarray:
+        """(n,) robots on their targets in subteams whose anchor is at the path's end (`end_home`): nothing moves
+        them on, so they start for home from there."""
+        out = np.zeros(self.n, dtype=bool)
+        if not self.cfg.end_home:
+            return out
+        for j, idx in enumerate(self.order):
+            if self.hold[j] is None and self.anchor[j] >= self.frame.length - 1e-6:
+                out[idx] = np.linalg.norm(pos[idx] - self.targets[idx], axis=1) < self.radius
         return out
 
     def _depth(self, j: int, spacing: float) -> float:

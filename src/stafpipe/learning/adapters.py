@@ -15,7 +15,8 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from stafpipe.controllers.base import TeamInfo
-from stafpipe.controllers.staf_plan import PlanConfig, StafPlan
+from stafpipe.controllers.plan_config import PlanConfig
+from stafpipe.controllers.staf_plan import StafPlan
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.features import Features, features, guide_targets, staf_features
@@ -57,6 +58,11 @@ class Adapter:
     def step(self, obs: Observation, dt: float) -> Step:
         raise NotImplementedError
 
+    def features(self, obs: Observation) -> Features:
+        """What the network would see in another observation `obs` of the same worlds at the last step's targets
+        (the imitation's relabelled copies, ppo._teacher_samples); the plan does not move."""
+        raise NotImplementedError
+
     def goals(self) -> np.ndarray:
         """(B, n, 2) each robot's goal slot now (where arrival is judged)."""
         return np.stack([t.goal for t in self.teams])
@@ -95,8 +101,11 @@ class DGNNAdapter(Adapter):
                 target[ws] = guided.reshape(len(ws), -1, 2)
         else:
             target = goal
-        self._aim = target  # a teacher steers where the network is guided
+        self._aim = self._target = target  # a teacher steers where the network is guided
         return Step(features(obs, pc.goal_clip, self.sensing_radius, target), goal, target)
+
+    def features(self, obs: Observation) -> Features:
+        return features(obs, self.policy.goal_clip, self.sensing_radius, self._target)
 
 
 class StafAdapter(Adapter):
@@ -152,9 +161,11 @@ class StafAdapter(Adapter):
         target = np.stack([p.step(obs.position[w], dt) for w, p in enumerate(self.plans)])
         if not self.shadows:
             self._aim = target
-        same = np.stack([p.same for p in self.plans])
-        f = staf_features(obs, target, same, self.policy.goal_clip, self.sensing_radius)
-        return Step(f, target, target)
+        self._target, self._same = target, np.stack([p.same for p in self.plans])
+        return Step(self.features(obs), target, target)
+
+    def features(self, obs: Observation) -> Features:
+        return staf_features(obs, self._target, self._same, self.policy.goal_clip, self.sensing_radius)
 
     def goals(self) -> np.ndarray:
         return np.stack([p.goal for p in self.plans])  # the regroup reassigns the goal slots

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from stafpipe.controllers.staf_plan import PlanConfig
+from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
 
@@ -86,6 +86,13 @@ class ImitationConfig:
     near_weight: float = 1.0
     """Weight of the samples where the teacher brakes for a neighbour or an obstacle (its action differs from the
     free proportional step) against 1 for the rest; 1: plain regression."""
+    wall_copies: float = 0.0
+    """Fraction of the collected steps to which a relabelled copy is added: every robot's closest obstacle replaced
+    by a wall point at a random bearing 0-0.4 m from its surface (`teachers.near_wall_copy`), the teacher's action on
+    it the label; 0: none (the shipped recipe before 2026-11-28)."""
+    neighbour_copies: float = 0.0
+    """The same with each robot's nearest sensed neighbour moved, in that robot's view, to a random bearing 0-0.4 m
+    from its surface (`teachers.near_neighbour_copy`); 0: none."""
     lr: float = 1e-3
     batch: int = 256
     """World-steps per minibatch."""
@@ -174,6 +181,9 @@ class TrainPPOConfig:
             "gain > 0, noise >= 0, lr > 0, near_weight > 0",
             (im.gain, im.noise, im.lr, im.near_weight),
         )
+        for name in ("wall_copies", "neighbour_copies"):
+            value = getattr(im, name)
+            require(0.0 <= value <= 1.0, f"{key}.imitation.{name}", "must be in [0, 1]", value)
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)

@@ -24,12 +24,13 @@ from stafpipe.controllers.base import TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS, Adapter
 from stafpipe.learning.config import TrainPPOConfig
+from stafpipe.learning.features import Features
 from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.learning.rollout import Rollout, collect, commands, gae
-from stafpipe.learning.teachers import teacher_actions
+from stafpipe.learning.teachers import near_neighbour_copy, near_wall_copy, teacher_actions
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario
-from stafpipe.sensing import SensingConfig
+from stafpipe.sensing import Observation, SensingConfig
 from stafpipe.torch_io import save_payload, training_device
 from stafpipe.world import WorldConfig, Worlds
 
@@ -139,24 +140,33 @@ def _teacher_samples(
     mask: list[torch.Tensor] = []
     target: list[torch.Tensor] = []
     weight: list[torch.Tensor] = []
-    for _ in range(tc.episode_steps):
-        f = adapter.step(obs, world_cfg.control_dt).features
-        to_aim = adapter.teacher_aim() - obs.position
-        act = teacher_actions(im.teacher, to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
+    radius, top = worlds.robot.radius, worlds.robot.max_speed
+
+    def labelled(f: Features, seen: Observation, to_aim: np.ndarray) -> np.ndarray:
+        """Store one step's samples (features `f` of observation `seen`) with the teacher's actions as labels."""
+        act = teacher_actions(im.teacher, to_aim, seen, radius, top, im.gain)
         for store, x in ((own, f.own), (edge, f.edge), (mask, f.mask)):
             store.append(torch.from_numpy(x))
         target.append(torch.from_numpy(act.astype(np.float32)))
         braking = np.zeros(act.shape[:-1], dtype=bool)
         if im.near_weight != 1:  # where the teacher brakes for a neighbour or a wall the sample weighs more
-            free = teacher_actions("proportional", to_aim, obs, worlds.robot.radius, worlds.robot.max_speed, im.gain)
-            braking = np.abs(act - free).sum(-1) > 1e-6
+            braking = np.abs(act - teacher_actions("proportional", to_aim, seen, radius, top, im.gain)).sum(-1) > 1e-6
         weight.append(torch.from_numpy(np.where(braking, im.near_weight, 1.0)).float())
-        drive = act
+        return act
+
+    for _ in range(tc.episode_steps):
+        f = adapter.step(obs, world_cfg.control_dt).features
+        to_aim = adapter.teacher_aim() - obs.position
+        drive = labelled(f, obs, to_aim)
         if policy is not None:
             with torch.no_grad():
-                drive = policy.act(own[-1], edge[-1], mask[-1]).numpy().astype(float)
+                drive = policy.act(*(torch.from_numpy(x) for x in (f.own, f.edge, f.mask))).numpy().astype(float)
+        for fraction, copy_of in ((im.wall_copies, near_wall_copy), (im.neighbour_copies, near_neighbour_copy)):
+            if fraction > 0 and rng.random() < fraction:  # no draw without copies: old recipes unchanged
+                near = copy_of(obs, radius, rng)
+                labelled(adapter.features(near), near, to_aim)
         obs, _ = worlds.step(
-            commands(drive + rng.normal(0.0, im.noise, act.shape), worlds.heading, worlds.robot.max_speed)
+            commands(drive + rng.normal(0.0, im.noise, drive.shape), worlds.heading, worlds.robot.max_speed)
         )
     return tuple(torch.cat(x) for x in (own, edge, mask, target, weight))
 

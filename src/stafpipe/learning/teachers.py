@@ -37,6 +37,38 @@ def check_low_level(low_level: str, gain: float, key: str) -> None:
     require(gain > 0, f"{key}.proportional_gain", "must be > 0", gain)
 
 
+NEAR_WALL_GAP = AVOID_DISTANCE + 0.05
+"""m: the synthetic wall points of `near_wall_copy` lie 0 to this far from the robot's surface (a little beyond where
+the `avoiding` teacher starts to brake)."""
+
+
+def near_wall_copy(obs: Observation, radius: float, rng: np.random.Generator) -> Observation:
+    """`obs` with every robot's closest obstacle point replaced by one at a uniform bearing, 0 to `NEAR_WALL_GAP`
+    from its surface: states in which the teacher brakes for a wall ahead, beside or behind, which the training maps
+    hold too few of for the network to learn the braking (docs/staf.md)."""
+    gap = rng.uniform(0.0, NEAR_WALL_GAP, obs.obstacle_distance.shape)
+    bearing = rng.uniform(-np.pi, np.pi, gap.shape)
+    vec = (radius + gap)[..., None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
+    return obs._replace(obstacle=vec, obstacle_distance=gap)
+
+
+def near_neighbour_copy(obs: Observation, radius: float, rng: np.random.Generator) -> Observation:
+    """`obs` with each robot's nearest sensed neighbour seen at a uniform bearing, 0 to `NEAR_WALL_GAP` from its
+    surface (only in that robot's own view, which is all its action depends on): states in which the teacher brakes
+    for a neighbour closing in from any side."""
+    rel = obs.rel_position.copy()
+    n = rel.shape[-2]
+    dist = np.where(obs.neighbours & ~np.eye(n, dtype=bool), np.linalg.norm(rel, axis=-1), np.inf)
+    nearest = dist.argmin(-1)
+    has = np.isfinite(dist.min(-1))
+    gap = rng.uniform(0.0, NEAR_WALL_GAP, has.shape)
+    bearing = rng.uniform(-np.pi, np.pi, has.shape)
+    vec = (2 * radius + gap)[..., None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
+    lead = np.indices(has.shape)
+    rel[(*(x[has] for x in lead), nearest[has])] = vec[has]
+    return obs._replace(rel_position=rel)
+
+
 def teacher_actions(
     kind: str, to_aim: np.ndarray, obs: Observation, radius: float, max_speed: float, gain: float
 ) -> np.ndarray:

@@ -1,0 +1,98 @@
+"""Settings of STAF's execution plan (controllers/staf_plan.py) and the constants it works with."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+WAY_CLEARANCE = 0.05
+"""m between a body and the obstacles along every way home before a subteam starts home short of the taken slots
+(`StafPlan._clear_ways`); chosen, not tuned: a little more than the 0.02 m at which the trainer counts a touch."""
+
+SIGHT_STEP, SIGHT_REACH = 0.1, 1.0
+"""m between the points checked along a robot's way to its target, and how far along the path from the robot's own
+place a target out of sight may be put (`StafPlan._in_sight`); chosen, not tuned: a way through a wall then has a
+point within 0.05 m of it, under the half-radius test for any robot wider than 0.1 m, and 1 m is about a robot's
+spacing in a formation."""
+
+
+@dataclass
+class PlanConfig:
+    """Execution settings of STAF's plan (part of `method=staf` and of `train_ppo.staf`)."""
+
+    m: str = "2"
+    """Subteams: a fixed number (2: STAF Table 1, Table 2 and Fig. 4 divide every team into two) or `auto` (our
+    extension: the smallest m whose subteams fit the narrowest passage at the smallest spacing, STAF Sec. 7)."""
+    adapt: str = "geometric"
+    """Formation adaptation in a narrow passage: `geometric` (the plan shrinks the subteam's spacing to the free width
+    ahead; what the shipped policy was trained on) or `nominal` (the plan keeps each subteam's formation at the
+    team's nominal spacing and the policy must deform it itself, as STAF Sec. 3 attributes to the intermediate GNN
+    under R^adp; measured worse, docs/staf.md "Learned adaptation")."""
+    single_file: bool = True
+    """Where a subteam's formation does not fit even at the smallest spacing (2r + min_gap; e.g. bollards 1.1 m
+    apart, or five robots abreast in 2.4 m), the plan turns its slots into a column along the path (blended in over
+    `file_ramp` metres); false keeps the formation's slots there too (docs/staf.md)."""
+    file_ramp: float = 2.0
+    """Distance (m) over which slots blend from the formation into the column before a single-file stretch and back
+    after it."""
+    safe_gap: float = 0.3
+    """Gap (m) between robot surfaces assumed when testing whether a subteam fits (as `high.safe_gap`)."""
+    min_gap: float = 0.2
+    """Smallest gap (m) between neighbouring robots' surfaces a shrunk formation may have."""
+    margin: float = 0.15
+    """Clearance (m) kept between a formation's outer robots and the walls."""
+    speed: float = 0.8
+    """Speed (m/s) of a subteam's anchor along the path (a fraction of max speed leaves room to catch up)."""
+    max_lead: float = 0.8
+    """The anchor waits when it is this far (m) ahead of its subteam's mean progress."""
+    follow_gap: float = 0.6
+    """Free space (m) between a subteam and the one ahead of it along the path."""
+    split_distance: float = 5.0
+    """The team splits when its progress is this close (m) to the first narrow part (at once if already closer)."""
+    balance: bool = False
+    """True: subteam sizes within one of each other (`highlevel.partition.balance_sizes`; the line's 3-1-3-3 becomes
+    3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
+    high_checkpoint: str = ""
+    """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
+    home: str = "departure"
+    """When the team's goal slots are given out: each time robots start for home (`departure`: the slots still free
+    go to every robot not yet home-bound, from where its target is then, min-sum-of-squares as in Turpin, Michael and
+    Kumar's CAPT, IJRR 2014), so robots arriving one by one do not cross each other's way; or once at the regroup
+    (`regroup`, from the robots' positions then; what the shipped policy was trained with). docs/staf.md."""
+    target_gap: float = 0.1
+    """> 0: targets of two robots closer than 2r + target_gap are pushed apart along the line joining them (a
+    split or regroup slide can bring them closer than the robots' diameter); 0: off (the shipped policy was trained
+    with 0). docs/staf.md."""
+    home_approach: float = 0.6
+    """> 0: after the regroup, a subteam behind the first stops `follow_gap` short of the goal slots already taken,
+    its robots then start for home, and a target more than this far behind its goal slot enters the slot from this
+    far straight behind it (along the way in), so that robots arriving later do not cut past or into robots already
+    seated; 0: as trained (later subteams follow the path to its end). docs/staf.md."""
+    extend_path: bool = True
+    """The path reaches back straight behind its start (`PathFrame(extend=True)`): slots the plan places
+    behind the start (a waiting subteam's, a column's rear) stay where they belong instead of all falling on the start
+    point, where they crowded robots that stood behind or beside it; false: clipped to the path, as trained."""
+    end_home: bool = True
+    """After the regroup, a robot of a subteam whose anchor has reached the path's end starts for home once it is
+    within a radius of its target (it can come no further); false: it waits until it has passed the last narrow
+    stretch, as trained, and where that stretch reaches to the path's end it waits for ever. docs/staf.md."""
+    in_sight: bool = True
+    """A robot whose straight way to its target passes within half a radius of an obstacle (a wall between them)
+    aims instead at the path, up to 1 m ahead of its own place on it, until its target is in sight again; false: it
+    heads for its target through the wall and stays pressed against it, as trained. docs/staf.md."""
+    unblock: bool = True
+    """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
+    ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""
+
+    def check(self, key: str) -> None:
+        from stafpipe.errors import require
+
+        require(
+            self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4", self.m
+        )
+        require(self.adapt in ("geometric", "nominal"), f"{key}.adapt", "must be geometric or nominal", self.adapt)
+        for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
+            require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
+        require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
+        require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)
+        require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
+        require(self.home_approach >= 0, f"{key}.home_approach", "must be >= 0", self.home_approach)

@@ -1,0 +1,62 @@
+"""STAF's plan safeguards added on 2026-11-28: robots held at the path's end start home (`plan.end_home`), and a
+target behind a wall moves onto the path (`plan.in_sight`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from staf_plans import ideal_run, start_and_plan
+from stafpipe.controllers.plan_config import PlanConfig
+from stafpipe.geometry import obstacle_distance
+from stafpipe.highlevel.infer import divider
+from stafpipe.scenario import build_scenario, load_scenario_file
+from stafpipe.stages.train_ppo import load_named_scenario
+
+_EXIT_TURN = """
+name: exit-turn
+world: {xmin: 0.0, ymin: 0.0, xmax: 18.26, ymax: 11.22}
+obstacles:
+  - box: {center: [9.13, 1.623], size: [11.26, 3.245]}
+  - box: {center: [9.13, 8.716], size: [11.26, 5.008]}
+team: {n: 8, formation: line, spacing: 1.0, start: [1.5, 5.61], goal: [16.76, 5.778], heading_deg: 0.0}
+time_limit: 120.0
+"""
+"""A 3 m corridor whose exit turns towards a goal 1 m off its axis: the free width across the path is narrow up to
+0.23 m before the path's end (a generated map on which two robots of the front subteam waited for ever)."""
+
+
+@pytest.mark.parametrize("end_home", [False, True])
+def test_robots_held_at_the_path_end_start_home(tmp_path, end_home) -> None:
+    """`plan.end_home`: where the narrow stretch reaches to the path's end, the front subteam's rear robots (a column
+    of five) can never pass it; with end_home they start for home from their slots once they stand on them."""
+    (tmp_path / "exit.yaml").write_text(_EXIT_TURN)
+    sc = build_scenario(load_scenario_file(tmp_path / "exit.yaml"))
+
+    def five_three(pos, goal, m):  # the split of the episode that waited: robots 3-7 in front, 0-2 behind
+        return (np.arange(len(pos)) < 3).astype(int)
+
+    tt, log, _ = ideal_run(sc, five_three, plan_cfg=PlanConfig(end_home=end_home, in_sight=False))
+    assert log["events"] == ["split", "regroup"]
+    assert math.isfinite(tt) == end_home
+
+
+def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot() -> None:
+    """`plan.in_sight`: a robot beside the corridor's mouth whose target lies inside the corridor (the wall between
+    them) aims at the path instead, no more than 1 m ahead of its own place on it; a robot that sees its target keeps
+    it."""
+    sc = load_named_scenario("corridor")
+    _, plan = start_and_plan(sc, divider(), PlanConfig())
+    (cx, cy), (w, h) = sc.spec.obstacles[1]["box"]["center"], sc.spec.obstacles[1]["box"]["size"]  # the upper wall
+    outside = np.array([cx - w / 2 - 0.5, cy - h / 2 + 1.0])  # before the wall's face, above the corridor's mouth
+    inside, _ = plan.frame.at(plan.frame.progress(outside[None])[0] + 3.0)
+    pos = np.array([outside, inside - [0.5, 0.0]])
+    assert obstacle_distance(pos, sc).min() > sc.spec.robot.radius
+    target = np.array([inside, inside + [0.5, 0.0]])
+    out = plan._in_sight(pos, target)
+    assert out[1] == pytest.approx(target[1])  # in sight: unchanged
+    assert obstacle_distance(out[:1], sc)[0] > sc.spec.robot.radius  # on the path, clear of the walls
+    assert plan.frame.progress(out[:1])[0] == pytest.approx(plan.frame.progress(pos[:1])[0] + 1.0, abs=1e-6)
+    assert plan.frame.lateral(out[:1])[0] == pytest.approx(0.0, abs=1e-6)
