@@ -8,11 +8,12 @@ WAY_CLEARANCE = 0.05
 """m between a body and the obstacles along every way home before a subteam starts home short of the taken slots
 (`StafPlan._clear_ways`); chosen, not tuned: a little more than the 0.02 m at which the trainer counts a touch."""
 
-SIGHT_STEP, SIGHT_REACH = 0.1, 1.0
-"""m between the points checked along a robot's way to its target, and how far along the path from the robot's own
-place a target out of sight may be put (`StafPlan._in_sight`); chosen, not tuned: a way through a wall then has a
-point within 0.05 m of it, under the half-radius test for any robot wider than 0.1 m, and 1 m is about a robot's
-spacing in a formation."""
+SIGHT_STEP, SIGHT_REACH, SIGHT_WAIT = 0.1, 1.0, 2.0
+"""m between the points checked along a robot's way to its target (a way that crosses a wall has one within half of
+this of it), how far along the path from the robot's own place a target out of sight may be put, and how many
+seconds it must have been out of sight first (`StafPlan._in_sight`); chosen, not tuned: 1 m is about a robot's
+spacing in a formation; a robot sliding round a bollard sees its target again within a second, one pressed against
+a wall never does (docs/staf.md)."""
 
 
 @dataclass
@@ -76,9 +77,9 @@ class PlanConfig:
     within a radius of its target (it can come no further); false: it waits until it has passed the last narrow
     stretch, as trained, and where that stretch reaches to the path's end it waits for ever. docs/staf.md."""
     in_sight: bool = True
-    """A robot whose straight way to its target passes within half a radius of an obstacle (a wall between them)
-    aims instead at the path, up to 1 m ahead of its own place on it, until its target is in sight again; false: it
-    heads for its target through the wall and stays pressed against it, as trained. docs/staf.md."""
+    """A robot whose straight way to its target has crossed an obstacle for 2 s (a wall between them) aims instead at
+    the path, up to 1 m from its own place on it, until its target is in sight again; false: it heads for its target
+    through the wall and stays pressed against it, as trained. docs/staf.md."""
     unblock: bool = True
     """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
     ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from stafpipe.controllers import plan_geometry as geo
-from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, WAY_CLEARANCE, PlanConfig
+from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, SIGHT_WAIT, WAY_CLEARANCE, PlanConfig
 from stafpipe.controllers.plan_geometry import extent, lateral_clearance, separated, unit_slots
 from stafpipe.formations import assign_slots
 from stafpipe.geometry import PathFrame, obstacle_distance
@@ -118,6 +118,7 @@ class StafPlan:
         # the way into the subteams at the split: targets slide from where the robots were to their new slots
         self.split_from: np.ndarray | None = None
         self.split_frac, self.split_rate = 1.0, 0.0
+        self.unseen = np.zeros(self.n)  # seconds each robot's target has been out of its sight (`in_sight`)
 
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
@@ -126,29 +127,31 @@ class StafPlan:
         if self.cfg.target_gap > 0:
             targets = separated(targets, 2 * self.radius + self.cfg.target_gap)
         if self.cfg.in_sight:
-            targets = self._in_sight(pos, targets)
+            targets = self._in_sight(pos, targets, dt)
         return targets
 
-    def _in_sight(self, pos: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        """`targets`, each one the robot cannot see (its straight way passes within half a radius of an obstacle)
-        replaced by the path's point at the target's arc length, held within 1 m of the robot's own (the path keeps
-        clear of obstacles, so the robot goes round the wall along it)."""
+    def _in_sight(self, pos: np.ndarray, targets: np.ndarray, dt: float) -> np.ndarray:
+        """`targets`, each one the robot has not seen for `SIGHT_WAIT` seconds (its straight way crosses an obstacle)
+        replaced by the path's point at the target's arc length, held within `SIGHT_REACH` of the robot's own (the
+        path keeps clear of obstacles, so the robot goes round the wall along it). A robot sliding round a bollard
+        sees its target again sooner, and keeps it."""
         way = targets - pos
         length = np.linalg.norm(way, axis=1)
         # a way inside the free disc around the robot is in sight: only the others are checked point by point (two
         # grid cells of margin: the grid's nearest-cell error at both ends, so the result is the same as checking all)
-        blocked = self.geometry.clearance(pos) < length + self.radius / 2 + 2 * self.geometry.resolution
-        if not blocked.any():
+        blocked = self.geometry.clearance(pos) < length + SIGHT_STEP / 2 + 2 * self.geometry.resolution
+        if blocked.any():
+            k = int(min(200, max(2, length[blocked].max() / SIGHT_STEP + 1)))
+            samples = pos[blocked, None] + np.linspace(0.0, 1.0, k)[None, :, None] * way[blocked, None]
+            blocked[blocked] = (self.geometry.clearance(samples) < SIGHT_STEP / 2).any(axis=1)
+        self.unseen = np.where(blocked, self.unseen + dt, 0.0)
+        lost = self.unseen >= SIGHT_WAIT - 1e-9
+        if not lost.any():
             return targets
-        k = int(min(200, max(2, length[blocked].max() / SIGHT_STEP + 1)))
-        samples = pos[blocked, None] + np.linspace(0.0, 1.0, k)[None, :, None] * way[blocked, None]
-        blocked[blocked] = (self.geometry.clearance(samples) < self.radius / 2).any(axis=1)
-        if not blocked.any():
-            return targets
-        own = self.frame.progress(pos[blocked])
-        s = np.clip(self.frame.progress(targets[blocked]), own - SIGHT_REACH, own + SIGHT_REACH)
+        own = self.frame.progress(pos[lost])
+        s = np.clip(self.frame.progress(targets[lost]), own - SIGHT_REACH, own + SIGHT_REACH)
         out = targets.copy()
-        out[blocked] = self.frame.at(s)[0]
+        out[lost] = self.frame.at(s)[0]
         return out
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
