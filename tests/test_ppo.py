@@ -211,7 +211,7 @@ def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) ->
     assert (plain == 1.0).all()
 
 
-def test_wall_copies_add_relabelled_near_wall_states(tmp_path) -> None:
+def test_wall_copies_add_relabelled_near_wall_states() -> None:
     """`imitation.wall_copies=1`: each collected step gets a copy whose robots all have a wall point 0-0.4 m from
     their surface, at a random bearing, labelled with the teacher's (braking) action on that copy; the real samples
     are those of a run without copies."""

@@ -42,13 +42,19 @@ NEAR_WALL_GAP = AVOID_DISTANCE + 0.05
 the `avoiding` teacher starts to brake)."""
 
 
+def _near_offsets(reach: float, shape: tuple[int, ...], rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Gaps (shape) uniform in [0, `NEAR_WALL_GAP`] and offsets (shape + (2,)) of length `reach` + gap at a uniform
+    bearing: where the copies put a wall point (reach: the radius) or a neighbour's centre (reach: 2 radii)."""
+    gap = rng.uniform(0.0, NEAR_WALL_GAP, shape)
+    bearing = rng.uniform(-np.pi, np.pi, shape)
+    return gap, (reach + gap)[..., None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
+
+
 def near_wall_copy(obs: Observation, radius: float, rng: np.random.Generator) -> Observation:
     """`obs` with every robot's closest obstacle point replaced by one at a uniform bearing, 0 to `NEAR_WALL_GAP`
     from its surface: states in which the teacher brakes for a wall ahead, beside or behind, which the training maps
     hold too few of for the network to learn the braking (docs/staf.md)."""
-    gap = rng.uniform(0.0, NEAR_WALL_GAP, obs.obstacle_distance.shape)
-    bearing = rng.uniform(-np.pi, np.pi, gap.shape)
-    vec = (radius + gap)[..., None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
+    gap, vec = _near_offsets(radius, obs.obstacle_distance.shape, rng)
     return obs._replace(obstacle=vec, obstacle_distance=gap)
 
 
@@ -61,9 +67,7 @@ def near_neighbour_copy(obs: Observation, radius: float, rng: np.random.Generato
     dist = np.where(obs.neighbours & ~np.eye(n, dtype=bool), np.linalg.norm(rel, axis=-1), np.inf)
     nearest = dist.argmin(-1)
     has = np.isfinite(dist.min(-1))
-    gap = rng.uniform(0.0, NEAR_WALL_GAP, has.shape)
-    bearing = rng.uniform(-np.pi, np.pi, has.shape)
-    vec = (2 * radius + gap)[..., None] * np.stack([np.cos(bearing), np.sin(bearing)], axis=-1)
+    _, vec = _near_offsets(2 * radius, has.shape, rng)
     lead = np.indices(has.shape)
     rel[(*(x[has] for x in lead), nearest[has])] = vec[has]
     return obs._replace(rel_position=rel)
