@@ -14,6 +14,7 @@ import stafpipe.learning.ppo as ppo
 import stafpipe.learning.rollout as rollout
 import stafpipe.stages.train_ppo as train_stage
 from conftest import job_dirs
+from staf_plans import scenario_with
 from stafpipe.controllers import make_controller
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.controllers.plan_config import PlanConfig
@@ -90,6 +91,29 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
     orca = teacher_actions("orca", far, obs, 0.2, 1.0, 2.0)
     assert orca[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 1e-6
     assert np.linalg.norm(orca[0, 0]) <= 1.0 + 1e-9
+
+
+@pytest.mark.slow  # two plans through the corridor: about 5 s on 2 cores
+def test_imitation_teacher_aims_where_the_network_does_unless_privileged() -> None:
+    """With `plan.adapt=nominal` the teacher drives to the plan's own nominal targets (what the network sees), unless
+    `imitation.privileged`: then to a shadow plan's geometrically shrunk ones, which differ inside the corridor."""
+    sc = scenario_with("corridor", "wedge")  # subteams of five: a wedge of five does not fit at 1 m spacing
+    worlds = Worlds([sc], SensingConfig(position_noise=0.0), WorldConfig(start_noise=0.0))
+    obs = worlds.reset([0])
+    team, gaps = _team(sc, worlds), {}
+    for privileged in (False, True):
+        plan = PlanConfig(adapt="nominal", balance=True)
+        adapter = ADAPTERS["staf"](PolicyConfig(), TrainPPOConfig().reward, plan, 2.0)
+        adapter.begin([team], privileged=privileged)
+        pos, gap = obs.position.copy(), 0.0
+        for _ in range(400):  # robots step straight to their targets (1 m/s, 0.1 s)
+            target = adapter.step(obs._replace(position=pos), 0.1).targets
+            gap = max(gap, float(np.abs(adapter.teacher_aim() - target).max()))
+            d = target - pos
+            pos = pos + d * np.minimum(1.0, 0.1 / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9))
+        gaps[privileged] = gap
+    assert gaps[False] == 0.0
+    assert gaps[True] > 0.1  # the shadow plan shrank the subteams' spacing in the corridor
 
 
 @pytest.mark.slow

@@ -45,8 +45,8 @@ class Adapter:
         self.policy, self.reward_cfg, self.plan_cfg, self.sensing_radius = policy, reward, plan, sensing_radius
         self.teams: list[TeamInfo] = []
 
-    def begin(self, teams: list[TeamInfo], teacher: bool = False) -> None:
-        """Start one episode in each of B worlds; `teacher`: also track what `teacher_aim` needs."""
+    def begin(self, teams: list[TeamInfo], privileged: bool = False) -> None:
+        """Start one episode in each of B worlds; `privileged`: `teacher_aim` may see more than the network."""
         self.teams = teams
         self._aim = np.stack([t.goal for t in teams])
 
@@ -136,16 +136,17 @@ class StafAdapter(Adapter):
         self._paths.append((team.scenario, centred_path(team.scenario, Geometry.of(team.scenario), team.passage_width)))
         return self._paths[-1][1]
 
-    def begin(self, teams: list[TeamInfo], teacher: bool = False) -> None:
-        """`teacher` with `plan.adapt=nominal`: shadow plans with the geometric adaptation run beside the method's
-        own: their targets are the imitation teacher's aim (privileged: the network never sees them)."""
+    def begin(self, teams: list[TeamInfo], privileged: bool = False) -> None:
+        """`privileged` with `plan.adapt=nominal` (`train_ppo.imitation.privileged`): shadow plans with the geometric
+        adaptation run beside the method's own: their targets are the imitation teacher's aim (the network never sees
+        them). Otherwise the teacher aims where the network does."""
         super().begin(teams)
         self.plans = [
             StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)
             for t in teams
         ]
         shadow = dataclasses.replace(self.plan_cfg, adapt="geometric")
-        privileged = teacher and self.plan_cfg.adapt != "geometric"  # else the teacher's aim is the plan's own
+        privileged = privileged and self.plan_cfg.adapt != "geometric"  # else the teacher's aim is the plan's own
         self.shadows = (
             [
                 StafPlan(shadow, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)

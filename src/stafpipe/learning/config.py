@@ -93,6 +93,11 @@ class ImitationConfig:
     neighbour_copies: float = 0.0
     """The same with each robot's nearest sensed neighbour moved, in that robot's view, to a random bearing 0-0.4 m
     from its surface (`teachers.near_neighbour_copy`); 0: none."""
+    privileged: bool = False
+    """method=staf with `plan.adapt=nominal`: true, the teacher drives to the targets of a shadow plan with the
+    geometric adaptation, which the network never sees (it must infer the shrink from what it senses; measured
+    worse, docs/staf.md "Learned adaptation"); false, the teacher drives to the plan's own nominal targets, as the
+    network sees them, and deforms the formation only by braking for walls and robots."""
     lr: float = 1e-3
     batch: int = 256
     """World-steps per minibatch."""

@@ -134,7 +134,7 @@ def _teacher_samples(
     im = tc.imitation
     worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
     obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, len(drawn))])
-    adapter.begin(teams_of(drawn, worlds), teacher=True)
+    adapter.begin(teams_of(drawn, worlds), privileged=im.privileged)
     own: list[torch.Tensor] = []
     edge: list[torch.Tensor] = []
     mask: list[torch.Tensor] = []
@@ -183,10 +183,10 @@ def imitate(
     """Warm start (`train_ppo.imitation.epochs` > 0): the network learns to imitate a hand-made low level (the
     teacher, learning/teachers.py) by supervised regression of the action mean, first on states the teacher visits,
     then (`imitation.dagger` rounds, DAgger: Ross, Gordon and Bagnell, AISTATS 2011) on states the network itself
-    visits, labelled by the teacher, all samples kept. The teacher may see more than the network
-    (`Adapter.teacher_aim`: for STAF with `plan.adapt=nominal`, the targets of the geometrically adapted plan, while
-    the network sees the nominal ones and must infer the adaptation from what it senses). The teacher is then gone:
-    PPO trains the network alone, a_i = psi(f_i) as printed (docs/staf.md)."""
+    visits, labelled by the teacher, all samples kept. With `imitation.privileged` the teacher may see more than the
+    network (`Adapter.teacher_aim`: for STAF with `plan.adapt=nominal`, the targets of the geometrically adapted plan,
+    while the network sees the nominal ones and must infer the adaptation from what it senses). The teacher is then
+    gone: PPO trains the network alone, a_i = psi(f_i) as printed (docs/staf.md)."""
     im = tc.imitation
     rng = np.random.default_rng([seed, 7])
     opt = torch.optim.Adam(policy.parameters(), lr=im.lr)
