@@ -25,7 +25,7 @@ from stafpipe.launch import launch
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
-from stafpipe.learning.teachers import teacher_actions
+from stafpipe.learning.teachers import SLIDE_MARGIN, off_the_wall, teacher_actions
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig, Worlds
@@ -91,6 +91,28 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
     orca = teacher_actions("orca", far, obs, 0.2, 1.0, 2.0)
     assert orca[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 1e-6
     assert np.linalg.norm(orca[0, 0]) <= 1.0 + 1e-9
+
+
+def test_sliding_teacher_aims_along_a_wall_at_its_margin() -> None:
+    """A slot in the wall ahead: the `sliding` teacher aims at the line SLIDE_MARGIN in front of the wall, a slot beside
+    it along the wall is kept, so the robot runs along the wall instead of pressing against it."""
+    sc = load_named_scenario("corridor")
+    worlds = Worlds([sc], SensingConfig(position_noise=0.0))
+    worlds.reset([0])
+    worlds.pos[0, 0] = [12.0 - 0.2 - 0.5, 9.0]  # robot 0 half a metre in front of the upper wall block's face (x = 12)
+    obs = worlds.observe()
+    normal = obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])
+    assert normal == pytest.approx([1.0, 0.0], abs=1e-6)
+    aim = np.zeros_like(obs.position)
+    aim[0, 0] = [2.0, 1.0]  # 1.5 m into the wall, 1 m along it
+    moved = off_the_wall(aim, obs, 0.2)
+    assert moved[0, 0] == pytest.approx([0.5 - SLIDE_MARGIN, 1.0], abs=1e-6)
+    assert np.array_equal(moved[0, 1:], aim[0, 1:])  # the others aim at their own robot: nothing to move
+    along = aim.copy()
+    along[0, 0] = [0.1, 1.0]
+    assert np.array_equal(off_the_wall(along, obs, 0.2), along)
+    act = teacher_actions("sliding", aim, obs, 0.2, 1.0, 2.0)
+    assert act[0, 0] @ normal == pytest.approx(2.0 * (0.5 - SLIDE_MARGIN) / np.hypot(2.0 * 0.35, 2.0), abs=1e-6)
 
 
 @pytest.mark.slow  # two plans through the corridor: about 5 s on 2 cores

@@ -31,8 +31,9 @@ class StafMethodConfig:
     low_level: str = "learned"
     """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf.md,
     `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed),
-    `avoiding` (the same with the classical methods' approach cap near robots and obstacles) or `orca` (the same
-    step as ORCA's preferred velocity); learning/teachers.py."""
+    `avoiding` (the same with the classical methods' approach cap near robots and obstacles), `sliding` (`avoiding`
+    aiming no closer to the closest obstacle than a margin) or `orca` (the same step as ORCA's preferred velocity);
+    learning/teachers.py."""
     proportional_gain: float = 2.0
     """low_level other than learned: the step's gain (1/s)."""
     plan: PlanConfig = field(default_factory=PlanConfig)

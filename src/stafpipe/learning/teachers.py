@@ -5,6 +5,10 @@
   staf_net.proportional_step).
 - `avoiding`: the same step, then the classical methods' collision avoidance (controllers/base.py:limit_approach):
   towards a robot or obstacle closer than 0.35 m the approach speed is capped at 2 x (gap - 0.02 m), as in `method=lf`.
+- `sliding`: `avoiding`, with the point aimed at first moved off the closest obstacle: where it lies beyond the
+  line `SLIDE_MARGIN` in front of that obstacle's surface (seen from the robot), it is moved back onto that line, so a
+  robot whose slot lies in a wall runs along the wall at that margin instead of pressing against it (a local formation
+  adaptation from what the robot senses: its target and its closest obstacle point).
 - `orca`: the same step as the preferred velocity of ORCA (controllers/orca.py; van den Berg et al., ISRR 2011) with
   `method=zhu`'s settings (horizon 1 s, margin 0.1 m, recovery 0.1 s): reciprocal avoidance of every sensed robot and
   the nearest obstacle point.
@@ -21,7 +25,10 @@ from stafpipe.controllers.zhu import ZhuConfig
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
-TEACHERS = ("proportional", "avoiding", "orca")
+TEACHERS = ("proportional", "avoiding", "sliding", "orca")
+SLIDE_MARGIN = 0.15
+"""m between a robot's surface and the closest obstacle that the `sliding` teacher's aim keeps (as the plan's
+`margin` between a formation's outer robots and the walls)."""
 _LF, _ZHU = LFConfig(), ZhuConfig()  # the teachers avoid as method=lf and method=zhu do by default
 AVOID_DISTANCE, AVOID_GAIN = _LF.avoid_distance, _LF.avoid_gain
 ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = _ZHU.orca_horizon, _ZHU.orca_margin, _ZHU.orca_recovery
@@ -78,9 +85,11 @@ def teacher_actions(
 ) -> np.ndarray:
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
     vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs`."""
+    if kind == "sliding":
+        to_aim = off_the_wall(to_aim, obs, radius)
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
     world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
-    if kind == "avoiding":
+    if kind in ("avoiding", "sliding"):
         world = np.stack(
             [limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN) for w in range(len(world))]
         )
@@ -92,3 +101,12 @@ def teacher_actions(
             ]
         )
     return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed
+
+
+def off_the_wall(to_aim: np.ndarray, obs: Observation, radius: float) -> np.ndarray:
+    """`to_aim` (.., n, 2) with each aimed point no further towards the robot's closest obstacle point than
+    `SLIDE_MARGIN` short of where its surface would touch it (the `sliding` teacher)."""
+    unit = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
+    room = obs.obstacle_distance - SLIDE_MARGIN  # how far the robot may move towards the obstacle
+    excess = np.maximum((to_aim * unit).sum(-1) - room, 0.0)
+    return to_aim - excess[..., None] * unit
