@@ -105,12 +105,12 @@ def test_sliding_teacher_aims_along_a_wall_at_its_margin() -> None:
     assert normal == pytest.approx([1.0, 0.0], abs=1e-6)
     aim = np.zeros_like(obs.position)
     aim[0, 0] = [2.0, 1.0]  # 1.5 m into the wall, 1 m along it
-    moved = off_the_wall(aim, obs, 0.2)
+    moved = off_the_wall(aim, obs)
     assert moved[0, 0] == pytest.approx([0.5 - SLIDE_MARGIN, 1.0], abs=1e-6)
     assert np.array_equal(moved[0, 1:], aim[0, 1:])  # the others aim at their own robot: nothing to move
     along = aim.copy()
     along[0, 0] = [0.1, 1.0]
-    assert np.array_equal(off_the_wall(along, obs, 0.2), along)
+    assert np.array_equal(off_the_wall(along, obs), along)
     act = teacher_actions("sliding", aim, obs, 0.2, 1.0, 2.0)
     assert act[0, 0] @ normal == pytest.approx(2.0 * (0.5 - SLIDE_MARGIN) / np.hypot(2.0 * 0.35, 2.0), abs=1e-6)
 

@@ -21,14 +21,15 @@ import numpy as np
 from stafpipe.controllers.base import limit_approach
 from stafpipe.controllers.lf import LFConfig
 from stafpipe.controllers.orca import orca_velocities
+from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.zhu import ZhuConfig
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
 TEACHERS = ("proportional", "avoiding", "sliding", "orca")
-SLIDE_MARGIN = 0.15
-"""m between a robot's surface and the closest obstacle that the `sliding` teacher's aim keeps (as the plan's
-`margin` between a formation's outer robots and the walls)."""
+SLIDE_MARGIN = PlanConfig().margin
+"""m between a robot's surface and the closest obstacle that the `sliding` teacher's aim keeps: the plan's default
+`margin` between a formation's outer robots and the walls (0.15 m)."""
 _LF, _ZHU = LFConfig(), ZhuConfig()  # the teachers avoid as method=lf and method=zhu do by default
 AVOID_DISTANCE, AVOID_GAIN = _LF.avoid_distance, _LF.avoid_gain
 ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = _ZHU.orca_horizon, _ZHU.orca_margin, _ZHU.orca_recovery
@@ -86,7 +87,7 @@ def teacher_actions(
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
     vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs`."""
     if kind == "sliding":
-        to_aim = off_the_wall(to_aim, obs, radius)
+        to_aim = off_the_wall(to_aim, obs)
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
     world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
     if kind in ("avoiding", "sliding"):
@@ -103,7 +104,7 @@ def teacher_actions(
     return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed
 
 
-def off_the_wall(to_aim: np.ndarray, obs: Observation, radius: float) -> np.ndarray:
+def off_the_wall(to_aim: np.ndarray, obs: Observation) -> np.ndarray:
     """`to_aim` (.., n, 2) with each aimed point no further towards the robot's closest obstacle point than
     `SLIDE_MARGIN` short of where its surface would touch it (the `sliding` teacher)."""
     unit = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
