@@ -4,6 +4,7 @@ start, the hand-made low levels of the ablation, and training on generated map d
 from __future__ import annotations
 
 import inspect
+import math
 import re
 
 import numpy as np
@@ -25,7 +26,7 @@ from stafpipe.launch import launch
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
-from stafpipe.learning.teachers import SLIDE_MARGIN, off_the_wall, teacher_actions
+from stafpipe.learning.teachers import AVOID_GAIN, SLIDE_MARGIN, off_the_wall, teacher_actions
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig, Worlds
@@ -113,6 +114,40 @@ def test_sliding_teacher_aims_along_a_wall_at_its_margin() -> None:
     assert np.array_equal(off_the_wall(along, obs), along)
     act = teacher_actions("sliding", aim, obs, 0.2, 1.0, 2.0)
     assert act[0, 0] @ normal == pytest.approx(2.0 * (0.5 - SLIDE_MARGIN) / np.hypot(2.0 * 0.35, 2.0), abs=1e-6)
+
+
+def test_sliding_teacher_caps_where_a_differential_drive_moves_not_only_where_it_aims() -> None:
+    """A differential-drive robot turning round towards an aim behind it drives along its heading meanwhile: with its
+    heading towards a neighbour 0.05 m away and its aim away from it, the `sliding` teacher scales the command (same
+    direction, so the same turn) until the forward motion's approach speed is within the cap; `avoiding`, which caps
+    only the commanded velocity, does not."""
+    sc = load_named_scenario("corridor")
+    worlds = Worlds([sc], SensingConfig(position_noise=0.0))
+    worlds.reset([0])
+    bearing, heading, aim_dir, gap = -1.46, -2.2, 2.9, 0.05  # the seed-777 map-1 contact (docs/staf.md)
+    worlds.pos[0, 0] = [15.0, 6.0]
+    worlds.pos[0, 1] = worlds.pos[0, 0] + (0.4 + gap) * np.array([math.cos(bearing), math.sin(bearing)])
+    worlds.heading[0, 0] = heading
+    obs = worlds.observe()
+    aim = np.zeros_like(obs.position)
+    aim[0, 0] = 2.0 * np.array([math.cos(aim_dir), math.sin(aim_dir)])
+    h = np.array([math.cos(heading), math.sin(heading)])
+    towards = np.array([math.cos(bearing), math.sin(bearing)])
+    cap = AVOID_GAIN * (gap - 0.02)
+
+    def approach(kind: str, drive: str) -> tuple[float, np.ndarray]:
+        act = teacher_actions(kind, aim, obs, 0.2, 1.0, 2.0, drive)
+        world = rollout.commands(act, obs.heading, 1.0)[0, 0]  # the world-frame command, top speed 1 m/s
+        return max(float(world @ h), 0.0) * float(h @ towards), world
+
+    plain, plain_cmd = approach("avoiding", "diff_drive")
+    capped, capped_cmd = approach("sliding", "diff_drive")
+    assert plain_cmd @ towards < 0 < plain  # the command leaves the neighbour, the drive's motion approaches it
+    assert capped == pytest.approx(cap, abs=1e-6)
+    assert capped_cmd[0] * plain_cmd[1] - capped_cmd[1] * plain_cmd[0] == pytest.approx(0.0, abs=1e-9)
+    assert capped_cmd @ plain_cmd > 0
+    holonomic, _ = approach("sliding", "holonomic")
+    assert holonomic == pytest.approx(plain, abs=1e-9)  # a holonomic robot moves as commanded: nothing to scale
 
 
 @pytest.mark.slow  # two plans through the corridor: about 5 s on 2 cores

@@ -111,8 +111,17 @@ class Controller:
         return self._worlds[w]
 
 
+STOP_GAP = 0.02
+"""m: the surface gap at which `limit_approach` lets no more approach."""
+
+
 def limit_approach(
-    v: np.ndarray, obs: Observation, radius: float, avoid_distance: float, avoid_gain: float, stop_gap: float = 0.02
+    v: np.ndarray,
+    obs: Observation,
+    radius: float,
+    avoid_distance: float,
+    avoid_gain: float,
+    stop_gap: float = STOP_GAP,
 ) -> np.ndarray:
     """Collision avoidance shared by the classical methods: towards any robot or obstacle closer than `avoid_distance`
     (surface to surface), the approach speed is capped at avoid_gain x (gap - stop_gap), so robots slide along and

@@ -121,9 +121,15 @@ class LearnedController(Controller):
             for kind, robots, detail in self.adapter.drain_events(w):
                 view.emit(kind, robots, detail)
         if self.teacher != "learned":
-            radius = self.adapter.teams[0].scenario.spec.robot.radius
+            robot = self.adapter.teams[0].scenario.spec.robot
             action = teacher_actions(
-                self.teacher, targets - obs.position, obs, radius, self.max_speed, self.cfg.proportional_gain
+                self.teacher,
+                targets - obs.position,
+                obs,
+                robot.radius,
+                self.max_speed,
+                self.cfg.proportional_gain,
+                robot.drive,
             )
         else:
             with torch.inference_mode():  # execution: no critic, no autograd bookkeeping

@@ -8,7 +8,11 @@
 - `sliding`: `avoiding`, with the point aimed at first moved off the closest obstacle: where it lies beyond the
   line `SLIDE_MARGIN` in front of that obstacle's surface (seen from the robot), it is moved back onto that line, so a
   robot whose slot lies in a wall runs along the wall at that margin instead of pressing against it (a local formation
-  adaptation from what the robot senses: its target and its closest obstacle point).
+  adaptation from what the robot senses: its target and its closest obstacle point). On a differential drive the
+  cap is applied a second time, to the motion the drive will make (forward along the heading, at the command's speed
+  times cos(heading error), drives.py): a robot turning round towards its aim drives along its heading meanwhile,
+  and two neighbours turning round the opposite ways drove into each other (measured: seed-777 map 1, a line of 8
+  whose start noise put two robots 0.34 m apart; the command pointed away from the neighbour, the heading at it).
 - `orca`: the same step as the preferred velocity of ORCA (controllers/orca.py; van den Berg et al., ISRR 2011) with
   `method=zhu`'s settings (horizon 1 s, margin 0.1 m, recovery 0.1 s): reciprocal avoidance of every sensed robot and
   the nearest obstacle point.
@@ -18,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stafpipe.controllers.base import limit_approach
+from stafpipe.controllers.base import STOP_GAP, limit_approach
 from stafpipe.controllers.lf import LFConfig
 from stafpipe.controllers.orca import orca_velocities
 from stafpipe.controllers.plan_config import PlanConfig
@@ -82,10 +86,17 @@ def near_neighbour_copy(obs: Observation, radius: float, rng: np.random.Generato
 
 
 def teacher_actions(
-    kind: str, to_aim: np.ndarray, obs: Observation, radius: float, max_speed: float, gain: float
+    kind: str,
+    to_aim: np.ndarray,
+    obs: Observation,
+    radius: float,
+    max_speed: float,
+    gain: float,
+    drive: str = "holonomic",
 ) -> np.ndarray:
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
-    vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs`."""
+    vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs` of
+    robots with this `drive` (scenario robot.drive)."""
     if kind == "sliding":
         to_aim = off_the_wall(to_aim, obs)
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
@@ -94,6 +105,8 @@ def teacher_actions(
         world = np.stack(
             [limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN) for w in range(len(world))]
         )
+        if kind == "sliding" and drive == "diff_drive":
+            world = forward_capped(world, obs, radius)
     elif kind == "orca":
         world = np.stack(
             [
@@ -102,6 +115,35 @@ def teacher_actions(
             ]
         )
     return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed
+
+
+MIN_COMMAND_SCALE = 1e-3
+"""The smallest factor `forward_capped` scales a command by: the drive turns towards any command above 1e-6 m/s, so a
+robot whose forward motion is capped to nothing still turns round towards its aim instead of standing pointed at
+its neighbour."""
+
+
+def forward_capped(world: np.ndarray, obs: Observation, radius: float) -> np.ndarray:
+    """World-frame commands (B, n, 2) of differential-drive robots scaled down so that the motion the drive makes
+    from them, forward along the heading at |command| x max(cos(heading error), 0) (drives.diff_drive), keeps the
+    approach cap of `limit_approach` (AVOID_GAIN x (gap - STOP_GAP) within AVOID_DISTANCE) towards every sensed robot
+    and the closest obstacle; the direction, and so the turn, is kept."""
+    heading = np.stack([np.cos(obs.heading), np.sin(obs.heading)], axis=-1)
+    forward = np.maximum((world * heading).sum(-1), 0.0)  # |command| x max(cos(error), 0)
+    dist = np.linalg.norm(obs.rel_position, axis=-1)
+    n = dist.shape[-1]
+    gaps = np.where(obs.neighbours & ~np.eye(n, dtype=bool), dist - 2 * radius, np.inf)
+    closing = (obs.rel_position * heading[..., None, :]).sum(-1) / np.maximum(dist, 1e-9)  # cos(heading, bearing)
+    wall_closing = (obs.obstacle * heading).sum(-1) / np.maximum(np.linalg.norm(obs.obstacle, axis=-1), 1e-9)
+    allowed = np.concatenate([gaps, obs.obstacle_distance[..., None]], axis=-1)
+    cosine = np.concatenate([closing, wall_closing[..., None]], axis=-1)
+    limit = np.where(
+        (allowed < AVOID_DISTANCE) & (cosine > 1e-9),
+        np.maximum(AVOID_GAIN * (allowed - STOP_GAP), 0.0) / np.maximum(cosine, 1e-9),
+        np.inf,
+    ).min(-1)  # the forward speed at which the closest-closing constraint is met exactly
+    scale = np.where(forward > limit, np.maximum(limit / np.maximum(forward, 1e-9), MIN_COMMAND_SCALE), 1.0)
+    return world * scale[..., None]
 
 
 def off_the_wall(to_aim: np.ndarray, obs: Observation) -> np.ndarray:
