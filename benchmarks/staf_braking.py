@@ -56,6 +56,7 @@ def count(sc: Scenario, ctrl: StafController, episodes: int, near: float, excess
     sensing = SensingConfig()
     ctx, path = episode_context(sc, Geometry(sc), sensing, EVAL.goal_tolerance, EVAL.cfi_margin)
     r, top, gain = sc.spec.robot.radius, sc.spec.robot.max_speed, ctrl.cfg.proportional_gain
+    drive = sc.spec.robot.drive
     wall = wall_under = robots = robots_under = contacts = 0
     for episode in range(episodes):
         worlds = Worlds([sc], sensing)
@@ -65,7 +66,7 @@ def count(sc: Scenario, ctrl: StafController, episodes: int, near: float, excess
             net = ctrl.act(obs)
             batch = Observation(*(np.asarray(x)[None] for x in obs))
             aim = (ctrl.targets - obs.position)[None]
-            teacher = commands(teacher_actions("avoiding", aim, batch, r, top, gain), batch.heading, top)[0]
+            teacher = commands(teacher_actions("avoiding", aim, batch, r, top, gain, drive), batch.heading, top)[0]
             to_wall = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=1, keepdims=True), 1e-9)
             close = obs.obstacle_distance < near
             faster = approach(net, to_wall) - approach(teacher, to_wall) > excess

@@ -46,7 +46,13 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
         if t % 10 == 0:
             out.append((f.own[0], f.edge[0], f.mask[0]))
         act = teacher_actions(
-            "avoiding", adapter.teacher_aim() - obs.position, obs, worlds.robot.radius, worlds.robot.max_speed, 2.0
+            "avoiding",
+            adapter.teacher_aim() - obs.position,
+            obs,
+            worlds.robot.radius,
+            worlds.robot.max_speed,
+            2.0,
+            worlds.robot.drive,
         )
         obs, _ = worlds.step(commands(act, worlds.heading, worlds.robot.max_speed))
     return out

@@ -17,7 +17,7 @@ import stafpipe.stages.train_ppo as train_stage
 from conftest import job_dirs
 from staf_plans import scenario_with
 from stafpipe.controllers import make_controller
-from stafpipe.controllers.base import TeamInfo
+from stafpipe.controllers.base import STOP_GAP, TeamInfo
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.staf import StafMethodConfig
 from stafpipe.episode import episode_context
@@ -76,20 +76,20 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
     obs = worlds.reset([0])
     aim = np.zeros_like(obs.position)
     aim[..., 0] = 0.2  # 0.2 m ahead: the proportional step is 0.4 of top speed (gain 2)
-    act = teacher_actions("proportional", aim, obs, 0.2, 1.0, 2.0)
+    act = teacher_actions("proportional", aim, obs, 0.2, 1.0, 2.0, "holonomic")
     assert np.allclose(act[..., 0], 0.4) and np.allclose(act[..., 1], 0.0)
     worlds.pos[0, 0] = [12.0 - 0.2 - 0.05, 9.0]  # robot 0 5 cm in front of the upper wall block's face (x = 12)
     obs = worlds.observe()
     far = np.zeros_like(obs.position)
     far[..., 0] = 5.0
-    capped = teacher_actions("avoiding", far, obs, 0.2, 1.0, 2.0)
-    free = teacher_actions("proportional", far, obs, 0.2, 1.0, 2.0)
+    capped = teacher_actions("avoiding", far, obs, 0.2, 1.0, 2.0, "holonomic")
+    free = teacher_actions("proportional", far, obs, 0.2, 1.0, 2.0, "holonomic")
     assert free[0, 0, 0] == pytest.approx(1.0)
     gap = obs.obstacle_distance[0, 0]
     assert gap == pytest.approx(0.05, abs=1e-6)
     assert capped[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 2.0 * (gap - 0.02) + 1e-9
     # ORCA's teacher: 5 cm from the wall is inside its 0.1 m margin, so it may not approach the wall at all
-    orca = teacher_actions("orca", far, obs, 0.2, 1.0, 2.0)
+    orca = teacher_actions("orca", far, obs, 0.2, 1.0, 2.0, "holonomic")
     assert orca[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 1e-6
     assert np.linalg.norm(orca[0, 0]) <= 1.0 + 1e-9
 
@@ -112,7 +112,7 @@ def test_sliding_teacher_aims_along_a_wall_at_its_margin() -> None:
     along = aim.copy()
     along[0, 0] = [0.1, 1.0]
     assert np.array_equal(off_the_wall(along, obs), along)
-    act = teacher_actions("sliding", aim, obs, 0.2, 1.0, 2.0)
+    act = teacher_actions("sliding", aim, obs, 0.2, 1.0, 2.0, "holonomic")
     assert act[0, 0] @ normal == pytest.approx(2.0 * (0.5 - SLIDE_MARGIN) / np.hypot(2.0 * 0.35, 2.0), abs=1e-6)
 
 
@@ -133,7 +133,7 @@ def test_sliding_teacher_caps_where_a_differential_drive_moves_not_only_where_it
     aim[0, 0] = 2.0 * np.array([math.cos(aim_dir), math.sin(aim_dir)])
     h = np.array([math.cos(heading), math.sin(heading)])
     towards = np.array([math.cos(bearing), math.sin(bearing)])
-    cap = AVOID_GAIN * (gap - 0.02)
+    cap = AVOID_GAIN * (gap - STOP_GAP)
 
     def approach(kind: str, drive: str) -> tuple[float, np.ndarray]:
         act = teacher_actions(kind, aim, obs, 0.2, 1.0, 2.0, drive)
@@ -196,7 +196,7 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
     obs = worlds.reset([5, 6])
     adapter.begin([_team(sc, worlds, 0), _team(sc, worlds, 1)])
     f = adapter.step(obs, 0.0).features
-    want = teacher_actions("proportional", adapter.teacher_aim() - obs.position, obs, 0.2, 1.0, 2.0)
+    want = teacher_actions("proportional", adapter.teacher_aim() - obs.position, obs, 0.2, 1.0, 2.0, "holonomic")
 
     def error() -> float:
         with torch.no_grad():

@@ -140,17 +140,18 @@ def _teacher_samples(
     mask: list[torch.Tensor] = []
     target: list[torch.Tensor] = []
     weight: list[torch.Tensor] = []
-    radius, top = worlds.robot.radius, worlds.robot.max_speed
+    radius, top, robot_drive = worlds.robot.radius, worlds.robot.max_speed, worlds.robot.drive
 
     def labelled(f: Features, seen: Observation, to_aim: np.ndarray) -> np.ndarray:
         """Store one step's samples (features `f` of observation `seen`) with the teacher's actions as labels."""
-        act = teacher_actions(im.teacher, to_aim, seen, radius, top, im.gain, worlds.robot.drive)
+        act = teacher_actions(im.teacher, to_aim, seen, radius, top, im.gain, robot_drive)
         for store, x in ((own, f.own), (edge, f.edge), (mask, f.mask)):
             store.append(torch.from_numpy(x))
         target.append(torch.from_numpy(act.astype(np.float32)))
         braking = np.zeros(act.shape[:-1], dtype=bool)
         if im.near_weight != 1:  # where the teacher brakes for a neighbour or a wall the sample weighs more
-            braking = np.abs(act - teacher_actions("proportional", to_aim, seen, radius, top, im.gain)).sum(-1) > 1e-6
+            free = teacher_actions("proportional", to_aim, seen, radius, top, im.gain, robot_drive)
+            braking = np.abs(act - free).sum(-1) > 1e-6
         weight.append(torch.from_numpy(np.where(braking, im.near_weight, 1.0)).float())
         return act
 

@@ -92,7 +92,7 @@ def teacher_actions(
     radius: float,
     max_speed: float,
     gain: float,
-    drive: str = "holonomic",
+    drive: str,
 ) -> np.ndarray:
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
     vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs` of
