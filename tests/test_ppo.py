@@ -211,6 +211,32 @@ def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) ->
     assert (plain == 1.0).all()
 
 
+def test_direction_weight_charges_a_short_action_pointing_the_wrong_way() -> None:
+    """A teacher's scaled-down command (length 0.005): the squared error barely tells a network action pointing the
+    other way from one along it; the direction term charges the wrong one ~2 x direction_weight more, the right one
+    nothing; with direction_weight 0 the loss is the plain squared error, and a teacher at rest adds no term."""
+    from stafpipe.learning.ppo import imitation_loss
+
+    target = torch.tensor([[[0.005, 0.0], [0.0, 0.0]]])
+    along, against = torch.tensor([[[0.004, 0.0], [0.0, 0.0]]]), torch.tensor([[[-0.004, 0.0], [0.0, 0.0]]])
+    ones = torch.ones(1, 2)
+    plain_along, plain_against = (
+        imitation_loss(along, target, ones, 1.0, 0.0),
+        imitation_loss(against, target, ones, 1.0, 0.0),
+    )
+    assert float(plain_against - plain_along) < 1e-4  # the squared error: 8e-5 / 2 robots apart
+    assert float(plain_along) == pytest.approx(0.001**2 / 2)
+    with_along, with_against = (
+        imitation_loss(along, target, ones, 1.0, 0.5),
+        imitation_loss(against, target, ones, 1.0, 0.5),
+    )
+    # the floor (1e-2) takes a 0.004-long action as 0.01 long: cosine -/+ 0.4, times 0.5, over 2 robots
+    assert float(with_along - plain_along) == pytest.approx(0.5 * (1 - 0.4) / 2, rel=1e-4)
+    assert float(with_against - plain_against) == pytest.approx(0.5 * (1 + 0.4) / 2, rel=1e-4)
+    unit = torch.tensor([[[0.6, 0.8], [0.0, 0.0]]])
+    assert float(imitation_loss(unit, unit, ones, 1.0, 0.5)) == pytest.approx(0.0, abs=1e-7)
+
+
 def test_wall_copies_add_relabelled_near_wall_states() -> None:
     """`imitation.wall_copies=1`: each collected step gets a copy whose robots all have a wall point 0-0.4 m from
     their surface, at a random bearing, labelled with the teacher's (braking) action on that copy; the real samples

@@ -87,6 +87,11 @@ class ImitationConfig:
     near_weight: float = 1.0
     """Weight of the samples where the teacher brakes for a neighbour or an obstacle (its action differs from the
     free proportional step) against 1 for the rest; 1: plain regression."""
+    direction_weight: float = 0.0
+    """Weight of a direction term, 1 - cos(network action, teacher action), added to each sample's squared error
+    (`ppo.imitation_loss`): a scaled-down command (the `sliding` teacher's near a robot or an obstacle) is a short
+    target whose direction the squared error weighs little, while a differential drive turns towards that direction
+    at its full turn rate whatever the command's length (drives.diff_drive); 0: none (the recipes before 2026-12-02)."""
     wall_copies: float = 0.0
     """Fraction of the collected steps to which a relabelled copy is added: every robot's closest obstacle replaced
     by a wall point at a random bearing 0-0.4 m from its surface (`teachers.near_wall_copy`), the teacher's action on
@@ -182,10 +187,10 @@ class TrainPPOConfig:
 
         require(im.teacher in TEACHERS, f"{key}.imitation.teacher", f"must be one of {list(TEACHERS)}", im.teacher)
         require(
-            im.gain > 0 and im.noise >= 0 and im.lr > 0 and im.near_weight > 0,
+            im.gain > 0 and im.noise >= 0 and im.lr > 0 and im.near_weight > 0 and im.direction_weight >= 0,
             f"{key}.imitation",
-            "gain > 0, noise >= 0, lr > 0, near_weight > 0",
-            (im.gain, im.noise, im.lr, im.near_weight),
+            "gain > 0, noise >= 0, lr > 0, near_weight > 0, direction_weight >= 0",
+            (im.gain, im.noise, im.lr, im.near_weight, im.direction_weight),
         )
         for name in ("wall_copies", "neighbour_copies"):
             value = getattr(im, name)

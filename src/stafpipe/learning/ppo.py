@@ -172,6 +172,28 @@ def _teacher_samples(
     return tuple(torch.cat(x) for x in (own, edge, mask, target, weight))
 
 
+DIRECTION_FLOOR = 1e-2
+"""Length below which the direction term (`imitation.direction_weight`) sees the network's action as this long: a
+bounded gradient for an action near zero (its cosine shrinks with it). A teacher's action shorter than 1e-6 has no
+direction and adds no term."""
+
+
+def imitation_loss(
+    act: torch.Tensor, target: torch.Tensor, weight: torch.Tensor, near_weight: float, direction_weight: float
+) -> torch.Tensor:
+    """The warm start's loss over (samples, robots, 2) actions: squared error to the teacher's action, plus
+    `direction_weight` x (1 - cos) of the angle between them where the teacher's action has a direction, averaged
+    over robots with `weight` (where `near_weight` != 1)."""
+    err = ((act - target) ** 2).sum(-1)
+    if direction_weight > 0:
+        length = torch.linalg.vector_norm(target, dim=-1)
+        cos = (act * target).sum(-1) / (
+            torch.linalg.vector_norm(act, dim=-1).clamp_min(DIRECTION_FLOOR) * length.clamp_min(1e-6)
+        )
+        err = err + direction_weight * torch.where(length > 1e-6, 1 - cos, torch.zeros_like(cos))
+    return err.mean() if near_weight == 1 else (err * weight).sum() / weight.sum()
+
+
 def imitate(
     policy: PolicyNet,
     adapter: Adapter,
@@ -206,8 +228,8 @@ def imitate(
                 order = torch.randperm(len(b_own), generator=gen)
                 for start in range(0, len(order), im.batch):
                     mb = order[start : start + im.batch]
-                    err = ((policy.act(b_own[mb], b_edge[mb], b_mask[mb]) - b_target[mb]) ** 2).sum(-1)
-                    loss = err.mean() if im.near_weight == 1 else (err * b_weight[mb]).sum() / b_weight[mb].sum()
+                    act = policy.act(b_own[mb], b_edge[mb], b_mask[mb])
+                    loss = imitation_loss(act, b_target[mb], b_weight[mb], im.near_weight, im.direction_weight)
                     opt.zero_grad()
                     loss.backward()
                     opt.step()
