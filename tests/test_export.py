@@ -112,3 +112,15 @@ def test_export_refuses_an_unknown_network_and_a_missing_checkpoint(workdir) -> 
     missing = CliRunner().invoke(app, ["export", "dgnn", "--checkpoint", "nowhere.pt"])
     assert missing.exit_code == 2 and "nowhere.pt" in missing.output
     assert not (workdir / "outputs" / "export").exists()
+
+
+def test_a_drive_input_network_is_exported_with_the_drive_flag_in_its_own_state() -> None:
+    from stafpipe.export_onnx import PolicyMean, example_inputs
+    from stafpipe.learning.config import PolicyConfig
+    from stafpipe.learning.features import STAF_OWN
+    from stafpipe.learning.staf_net import StafPolicy
+
+    module = PolicyMean(StafPolicy(PolicyConfig(hidden=8, drive_input=True)))
+    inputs = example_inputs("staf", module)
+    assert inputs["own"].shape[-1] == STAF_OWN + 1
+    assert module(**inputs).shape == (5, 2)

@@ -339,3 +339,13 @@ def test_the_warm_started_network_is_a_candidate_for_the_shipped_weights() -> No
     assert best_iteration([{**rows[0], **warm}, rows[1]]) == 0  # better than every PPO iteration: kept
     worse = {"imitation/val_success_rate": 0.9, "imitation/val_collisions_per_episode": 1.0}
     assert best_iteration([{**rows[0], **worse}, rows[1]]) == 2  # same SR, more contacts: the iteration wins
+
+
+def test_drive_input_and_direction_weight_are_checked() -> None:
+    from stafpipe.errors import StafpipeError
+
+    with pytest.raises(StafpipeError, match=r"train_ppo.policy.drive_input"):
+        TrainPPOConfig(method="dgnn", policy=PolicyConfig(drive_input=True)).check()
+    with pytest.raises(StafpipeError, match=r"direction_weight"):
+        TrainPPOConfig(imitation=ImitationConfig(direction_weight=-1.0)).check()
+    TrainPPOConfig(method="staf", policy=PolicyConfig(drive_input=True)).check()

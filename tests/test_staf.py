@@ -191,6 +191,46 @@ def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:
     assert np.allclose(f.own[i, :2], rot @ (target[i] - obs.position[i]), atol=1e-5)
 
 
+def test_drive_input_tells_the_network_each_robots_drive() -> None:
+    """`policy.drive_input`: the STAF adapter appends 1 (differential drive) or 0 (holonomic) to every robot's own
+    state, per world; the network adds w_drive to z_i where the flag is 1, so the same state gives another action on
+    each drive, and with the flag 0 the action is that of the same weights without the input."""
+    from stafpipe.controllers.base import TeamInfo
+    from stafpipe.learning.adapters import StafAdapter
+    from stafpipe.learning.config import RewardConfig
+
+    holo = scenario_with("corridor", "circle", 4)
+    diff = dataclasses.replace(
+        holo, spec=dataclasses.replace(holo.spec, robot=dataclasses.replace(holo.spec.robot, drive="diff_drive"))
+    )
+    cfg = PolicyConfig(hidden=8, drive_input=True)
+    adapter = StafAdapter(cfg, RewardConfig(), None, 2.0)
+    worlds = Worlds([holo, holo], SensingConfig())
+    obs = worlds.reset([0, 0])
+    path = np.array([[4.0, 6.0], [26.0, 6.0]])
+    teams = [
+        TeamInfo(sc, worlds.pos[w].copy(), worlds.goal[w].copy(), sc.template(), path, 2.4)
+        for w, sc in enumerate([holo, diff])
+    ]
+    adapter.begin(teams)
+    f = adapter.step(obs, 0.1).features
+    assert f.own.shape == (2, 4, STAF_OWN + 1)
+    assert (f.own[0, :, -1] == 0).all() and (f.own[1, :, -1] == 1).all()
+    assert np.allclose(f.own[0, :, :-1], f.own[1, :, :-1])  # the same start: only the flag differs
+    torch.manual_seed(0)
+    net = StafPolicy(cfg)
+    torch.nn.init.normal_(net.w_drive)
+    act = net.act(*(torch.from_numpy(x) for x in (f.own, f.edge, f.mask)))
+    assert not torch.allclose(act[0], act[1])
+    plain = StafPolicy(PolicyConfig(hidden=8))
+    plain.load_state_dict({k: v for k, v in net.state_dict().items() if k != "w_drive"})
+    holonomic = torch.from_numpy(f.own[0])
+    assert torch.allclose(
+        net.act(holonomic, *(torch.from_numpy(x[0]) for x in (f.edge, f.mask))),
+        plain.act(holonomic[..., :-1], *(torch.from_numpy(x[0]) for x in (f.edge, f.mask))),
+    )
+
+
 def test_spring_damper_term_matches_a_hand_computed_case() -> None:
     sc = scenario_with("corridor", "line", 3)
     worlds = Worlds([sc], SensingConfig())

@@ -92,7 +92,7 @@ def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Ten
         }
     from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
 
-    own, edge = (STAF_OWN, STAF_EDGE) if network == "staf" else (OWN, EDGE)
+    own, edge = (STAF_OWN + int(module.policy.cfg.drive_input), STAF_EDGE) if network == "staf" else (OWN, EDGE)
     mask = (torch.rand(n, n, generator=gen) < 0.6) & ~torch.eye(n, dtype=torch.bool)
     return {
         "own": torch.randn(n, own, generator=gen),

@@ -141,6 +141,7 @@ class StafAdapter(Adapter):
         adaptation run beside the method's own: their targets are the imitation teacher's aim (the network never sees
         them). Otherwise the teacher aims where the network does."""
         super().begin(teams)
+        self._diff_drive = np.array([t.scenario.spec.robot.drive == "diff_drive" for t in teams])
         self.plans = [
             StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)
             for t in teams
@@ -166,7 +167,8 @@ class StafAdapter(Adapter):
         return Step(self.features(obs), target, target)
 
     def features(self, obs: Observation) -> Features:
-        return staf_features(obs, self._target, self._same, self.policy.goal_clip, self.sensing_radius)
+        flag = self._diff_drive if self.policy.drive_input else None
+        return staf_features(obs, self._target, self._same, self.policy.goal_clip, self.sensing_radius, flag)
 
     def goals(self) -> np.ndarray:
         return np.stack([p.goal for p in self.plans])  # the regroup reassigns the goal slots

@@ -60,6 +60,10 @@ class PolicyConfig:
     message: str = "relu"
     """method=staf: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu`
     (learning/staf_net.py)."""
+    drive_input: bool = False
+    """method=staf: true appends to each robot's own state a flag of its drive (1 a differential drive, 0
+    holonomic; a robot knows its own drive), so that one network can act differently on each where their states look
+    the same (the `sliding` teacher's differential-drive cap, docs/staf.md); false: the state as printed (Sec. 3)."""
 
 
 @dataclass
@@ -198,6 +202,12 @@ class TrainPPOConfig:
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
+        require(
+            not self.policy.drive_input or self.method == "staf",
+            f"{key}.policy.drive_input",
+            "is read by method=staf only",
+            self.method,
+        )
         from stafpipe.devices import check_device
 
         check_device(self.device, f"{key}.device")

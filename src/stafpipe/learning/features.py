@@ -76,13 +76,19 @@ STAF_OWN, STAF_EDGE = 6, 9
 
 
 def staf_features(
-    obs: Observation, target: np.ndarray, same: np.ndarray, goal_clip: float, sensing_radius: float
+    obs: Observation,
+    target: np.ndarray,
+    same: np.ndarray,
+    goal_clip: float,
+    sensing_radius: float,
+    drive_flag: np.ndarray | None = None,
 ) -> Features:
     """STAF's robot states s (Sec. 3, Problem Definition: position, goal, velocity, closest obstacle), in robot i's
     frame. Own (.., n, 6): s_i = [t_i - p_i (clipped), q_i, c_i] (its position is the frame's origin); edge
     (.., n, n, 9): s_j - s_i = [p_j - p_i, t_j - t_i, q_j - q_i, c_j - c_i, same_ij - 1], where t is the robot's target
     from the plan (its subteam slot, later its goal) and same_ij says whether j is in i's subteam. z_j - z_i of the
-    intermediate GNN is W^z applied to this difference (staf_net.py)."""
+    intermediate GNN is W^z applied to this difference (staf_net.py). `drive_flag` (B,) (`policy.drive_input`): a 7th
+    own entry per robot, 1 where its world's robots have a differential drive."""
     c, s = np.cos(obs.heading), np.sin(obs.heading)
     to_target = target - obs.position
     dist = np.linalg.norm(to_target, axis=-1, keepdims=True)
@@ -92,6 +98,9 @@ def staf_features(
     own = np.concatenate(
         [to_robot_frame(clipped, c, s), to_robot_frame(obs.velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1
     )
+    if drive_flag is not None:
+        flag = np.broadcast_to(np.asarray(drive_flag, float).reshape(-1, *[1] * (own.ndim - 2), 1), own[..., :1].shape)
+        own = np.concatenate([own, flag], axis=-1)
     cc, ss = c[..., :, None], s[..., :, None]
     pair = lambda v: v[..., None, :, :] - v[..., :, None, :]  # noqa: E731  [i, j] = v_j - v_i
     diff = np.concatenate(

@@ -42,16 +42,25 @@ class StafPolicy(PolicyNet):
         self.psi = nn.Sequential(nn.Linear(h, h), nn.ReLU(), nn.Linear(h, 2))
         self.critic = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, 1))
         self.log_std = nn.Parameter(torch.full((2,), cfg.init_log_std))
+        if cfg.drive_input:  # z_i gains w_drive where robot i has a differential drive (own's 7th entry)
+            self.w_drive = nn.Parameter(torch.zeros(h))
         if cfg.prior_gain > 0:  # a residual starts at zero: the untrained policy is the proportional step itself
             last = self.psi[2]
             assert isinstance(last, nn.Linear)
             nn.init.zeros_(last.weight)
             nn.init.zeros_(last.bias)
 
+    def _own_embedding(self, own: torch.Tensor) -> torch.Tensor:
+        """z_i = W^z s_i: s_i in its own frame is [0, 0, own, 1] (p_i - p_i = 0, same_ii = 1), so W^z s_i =
+        W^z[:, 2:8] own + W^z[:, 8] + b; with `drive_input`, + w_drive x own's drive flag."""
+        z = own[..., :6] @ self.w_z.weight[:, 2:8].T + self.w_z.weight[:, 8] + self.b_z
+        if self.cfg.drive_input:
+            z = z + own[..., 6:7] * self.w_drive
+        return z
+
     def embed(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        """f (.., n, hidden): own (.., n, 6), edge (.., n, n, 9), mask (.., n, n)."""
-        # s_i in its own frame is [0, 0, own, 1]: p_i - p_i = 0, same_ii = 1; W^z s_i = W^z[:, 2:8] own + W^z[:, 8] + b
-        z = own @ self.w_z.weight[:, 2:8].T + self.w_z.weight[:, 8] + self.b_z
+        """f (.., n, hidden): own (.., n, 6, or 7 with `drive_input`), edge (.., n, n, 9), mask (.., n, n)."""
+        z = self._own_embedding(own)
         dz = self.w_z(edge)  # W^z (s_j - s_i) = z_j - z_i (linear, so the bias cancels)
         msg = self.w_f(dz)
         if self.cfg.message == "relu":
@@ -61,7 +70,7 @@ class StafPolicy(PolicyNet):
     def embed_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
         """`embed` on an edge list, for large teams: own (n, 6), receiver (E,) = i of each pair, diff (E, 9) = s_j -
         s_i."""
-        z = own @ self.w_z.weight[:, 2:8].T + self.w_z.weight[:, 8] + self.b_z
+        z = self._own_embedding(own)
         msg = self.w_f(self.w_z(diff))
         if self.cfg.message == "relu":
             msg = torch.relu(msg + self.b_msg)
