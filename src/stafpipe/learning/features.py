@@ -99,7 +99,7 @@ def staf_features(
         [to_robot_frame(clipped, c, s), to_robot_frame(obs.velocity, c, s), to_robot_frame(obstacle, c, s)], axis=-1
     )
     if drive_flag is not None:
-        flag = np.broadcast_to(np.asarray(drive_flag, float).reshape(-1, *[1] * (own.ndim - 2), 1), own[..., :1].shape)
+        flag = np.broadcast_to(np.asarray(drive_flag, float)[..., None, None], own.shape[:-1] + (1,))  # per world
         own = np.concatenate([own, flag], axis=-1)
     cc, ss = c[..., :, None], s[..., :, None]
     pair = lambda v: v[..., None, :, :] - v[..., :, None, :]  # noqa: E731  [i, j] = v_j - v_i

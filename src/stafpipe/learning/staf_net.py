@@ -53,7 +53,7 @@ class StafPolicy(PolicyNet):
     def _own_embedding(self, own: torch.Tensor) -> torch.Tensor:
         """z_i = W^z s_i: s_i in its own frame is [0, 0, own, 1] (p_i - p_i = 0, same_ii = 1), so W^z s_i =
         W^z[:, 2:8] own + W^z[:, 8] + b; with `drive_input`, + w_drive x own's drive flag."""
-        z = own[..., :STAF_OWN] @ self.w_z.weight[:, 2 : 2 + STAF_OWN].T + self.w_z.weight[:, 8] + self.b_z
+        z = own[..., :STAF_OWN] @ self.w_z.weight[:, 2 : 2 + STAF_OWN].T + self.w_z.weight[:, 2 + STAF_OWN] + self.b_z
         if self.cfg.drive_input:
             z = z + own[..., STAF_OWN : STAF_OWN + 1] * self.w_drive
         return z
