@@ -1,8 +1,9 @@
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from stafpipe.geometry import Geometry, path_length
+from stafpipe.geometry import Geometry, obstacle_distance, path_length
 from stafpipe.launch import launch
 from stafpipe.paths import conf_dir
 from stafpipe.scenario import ScenarioError, build_scenario, load_scenario_file
@@ -62,6 +63,22 @@ def test_shortest_path_goes_around_an_obstacle() -> None:
     path = Geometry(sc).shortest_path((4.0, 8.0), (36.0, 8.0), 0.2)
     # The 2 m box at (12, 8) blocks the straight line: the path detours, but by less than going over its corner.
     assert 32.0 < path_length(path) < 32.0 + 2 * (2**0.5 - 1) * 1.2 + 0.2
+
+
+def test_paths_to_one_goal_from_a_tree_rooted_there_are_as_short() -> None:
+    """`Geometry.path_to` (one Dijkstra tree rooted at the goal, for L&F's many starts) finds ways as short as a
+    search from each start, round the box, and keeps clear of it; no way at all is refused as by `shortest_path`."""
+    sc = build_scenario(load_scenario_file(conf_dir() / "scenario" / "zhu_corridor16.yaml"))
+    g = Geometry(sc)
+    for start in ((4.0, 8.0), (4.3, 7.6), (5.0, 9.1)):
+        tree, own = g.path_to(start, (36.0, 8.0), 0.2), g.shortest_path(start, (36.0, 8.0), 0.2)
+        assert tree[0] == pytest.approx(start) and tree[-1] == pytest.approx((36.0, 8.0))
+        assert path_length(tree) == pytest.approx(path_length(own), abs=2 * g.resolution)
+        t = np.linspace(0.0, 1.0, 200)[:, None, None]
+        along = (tree[:-1] + t * (tree[1:] - tree[:-1])).reshape(-1, 2)
+        assert obstacle_distance(along, sc).min() > 0.2 - 2 * g.resolution  # round the box, clear of it
+    with pytest.raises(ValueError, match="no path"):
+        g.path_to((4.0, 8.0), (36.0, 8.0), 50.0)
 
 
 @pytest.mark.slow  # about 2 s on 2 cores: keeps `-m "not slow"` under 90 s

@@ -1,5 +1,6 @@
-"""STAF's plan safeguards added on 2026-11-28: robots held at the path's end start home (`plan.end_home`), and a
-target behind a wall moves onto the path (`plan.in_sight`)."""
+"""STAF's plan safeguards: robots held at the path's end start home (`plan.end_home`), a target behind a wall moves
+onto the path (`plan.in_sight`), a column takes its robots' order along the path (`plan.reorder`) and targets stay
+inside the world (`plan.in_world`)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 
 from staf_plans import ideal_run, start_and_plan
 from stafpipe.controllers.plan_config import PlanConfig
+from stafpipe.controllers.plan_geometry import column_rank, follow_order
 from stafpipe.geometry import obstacle_distance
 from stafpipe.highlevel.infer import divider
 from stafpipe.scenario import build_scenario, load_scenario_file
@@ -67,3 +69,60 @@ def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot() -> None
     assert plan.frame.lateral(out[:1])[0] == pytest.approx(0.0, abs=1e-6)
     target[0] = pos[0] - [0.5, 0.0]  # in sight again: its own target at once
     assert plan._in_sight(pos, target, 0.1) == pytest.approx(target)
+
+
+def test_follow_order_swaps_only_robots_standing_the_other_way_round() -> None:
+    """`plan.reorder`: a column's neighbours swap places where the one placed behind stands more than the margin ahead
+    along the path; within the margin (robots side by side) the order stays."""
+    rank = np.array([0, 1, 2, 3])
+    assert follow_order(rank, np.array([1.0, 3.0, 2.0, 0.0]), 0.2).tolist() == [2, 0, 1, 3]
+    assert follow_order(rank, np.array([3.0, 3.1, 2.0, 2.15]), 0.2).tolist() == [0, 1, 2, 3]
+    assert follow_order(np.array([3, 2, 1, 0]), np.array([0.0, 1.0, 2.0, 3.0]), 0.2).tolist() == [3, 2, 1, 0]
+    # past the stretch's end (1.5) robot 0 keeps its place; robot 3 passes robot 2, which has not come to it
+    assert follow_order(rank, np.array([2.0, 3.0, 0.0, -1.0]), 0.2, until=1.5).tolist() == [0, 1, 2, 3]
+    assert follow_order(rank, np.array([2.0, 3.0, 0.0, 1.0]), 0.2, until=1.5).tolist() == [0, 1, 3, 2]
+    # from a wedge's slots: the tip first, then left to right
+    assert column_rank(np.array([[0.0, 0.0], [-1.0, 1.0], [-1.0, -1.0]])).tolist() == [0, 1, 2]
+
+
+def _five_behind(pos, goal, m):  # the split of an episode on the exit-turn map: robots 0-4 wait, 5-7 go first
+    return (np.arange(len(pos)) < 5).astype(int)
+
+
+def test_a_column_placed_the_other_way_round_follows_its_robots(tmp_path) -> None:
+    """`plan.reorder`: a subteam in single file (five robots abreast do not fit the 3 m corridor) whose column order
+    is the reverse of where its robots stand gets targets in their own order, so no robot has to pass another;
+    without it the front target goes to the robot at the back."""
+    (tmp_path / "exit.yaml").write_text(_EXIT_TURN)
+    sc = build_scenario(load_scenario_file(tmp_path / "exit.yaml"))
+    for reorder in (False, True):
+        pos, plan = start_and_plan(sc, _five_behind, PlanConfig(reorder=reorder))
+        plan.step(pos, 0.1)
+        j = next(j for j in range(len(plan.order)) if plan.file_weights[j].any())  # a subteam that goes in file
+        idx = plan.order[j]
+        s = plan.frame.length / 2
+        plan.hold[j], plan.anchor[j], plan.split_frac = None, s, 1.0  # moving, in file, slid into its subteam
+        plan.file_weights[j][:] = 1.0
+        plan.ranks[j] = np.arange(len(idx))  # robot idx[0] in front ...
+        behind = plan.frame.at(s - 1.0 * np.arange(len(idx))[::-1])[0]  # ... but standing at the back
+        pos[idx] = behind
+        targets = plan._step(pos, 0.0)[idx]
+        order = np.argsort(-plan.frame.progress(targets))  # robots from the front target to the back one
+        assert (order.tolist() == list(range(len(idx) - 1, -1, -1))) == reorder
+
+
+def test_targets_stay_inside_the_world(tmp_path) -> None:
+    """`plan.in_world`: behind a start 1.5 m from the world's edge the rear subteam's column (five robots) reaches
+    back beyond the edge; with in_world every target keeps a radius and the margin from it."""
+    (tmp_path / "exit.yaml").write_text(_EXIT_TURN)
+    sc = build_scenario(load_scenario_file(tmp_path / "exit.yaml"))
+    keep = sc.spec.robot.radius + PlanConfig().margin
+    for in_world in (False, True):
+        pos, plan = start_and_plan(sc, _five_behind, PlanConfig(in_world=in_world))
+        lowest = np.inf
+        for _ in range(100):  # robots straight to their targets at 1 m/s
+            target = plan.step(pos, 0.1)
+            lowest = min(lowest, float(target[:, 0].min()))
+            way = target - pos
+            pos = pos + way * np.minimum(1.0, 0.1 / np.maximum(np.linalg.norm(way, axis=1, keepdims=True), 1e-9))
+        assert (lowest >= sc.spec.world.xmin + keep - 1e-9) == in_world

@@ -164,19 +164,42 @@ class Geometry:
         return self.remember(("graph", float(clearance)), build)
 
     def _shortest_path(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
-        xs, ys, _ = self.grid
-        h, w = len(ys), len(xs)
-        idx = np.arange(h * w).reshape(h, w)
-        graph = self._graph(clearance)
-        s, g = self._cell(start), self._cell(goal)
-        dist, pred = dijkstra(graph, directed=False, indices=idx[s], return_predecessors=True)
-        if not np.isfinite(dist[idx[g]]):
-            raise ValueError(f"no path from {start} to {goal} with clearance {clearance}")
-        cells = [idx[g]]
-        while cells[-1] != idx[s]:
+        s, g = self._node(start), self._node(goal)
+        dist, pred = dijkstra(self._graph(clearance), directed=False, indices=s, return_predecessors=True)
+        return self._pulled(self._trace(dist, pred, g, s, (start, goal, clearance))[::-1], start, goal, clearance)
+
+    def path_to(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
+        """As `shortest_path`, read from one Dijkstra tree rooted at the goal, kept per (goal, clearance): for many
+        starts and one goal (L&F's leader from each episode's own perturbed start), one search instead of one per
+        start. The same length as `shortest_path`'s; where two ways tie it may take the other."""
+        g = self._node(goal)
+        dist, pred = self.remember(
+            ("tree", g, float(clearance)),
+            lambda: dijkstra(self._graph(clearance), directed=False, indices=g, return_predecessors=True),
+        )
+        return self._pulled(
+            self._trace(dist, pred, self._node(start), g, (start, goal, clearance)), start, goal, clearance
+        )
+
+    def _node(self, point: tuple[float, float]) -> int:
+        i, j = self._cell(point)
+        return i * len(self.grid[0]) + j
+
+    @staticmethod
+    def _trace(dist: np.ndarray, pred: np.ndarray, node: int, root: int, asked: tuple) -> np.ndarray:
+        """Grid nodes from `node` back to the search's `root` along the predecessors; `asked` (start, goal,
+        clearance) names the search in the error where there is no way."""
+        if not np.isfinite(dist[node]):
+            raise ValueError("no path from {} to {} with clearance {}".format(*asked))
+        cells = [node]
+        while cells[-1] != root:
             cells.append(pred[cells[-1]])
-        rc = np.array(cells[::-1])
-        pts = np.stack([xs[rc % w], ys[rc // w]], axis=1)
+        return np.array(cells)
+
+    def _pulled(self, cells: np.ndarray, start, goal, clearance: float) -> np.ndarray:
+        """Grid nodes (start to goal) as points, the ends replaced by start and goal, shortened along lines of sight."""
+        xs, ys, _ = self.grid
+        pts = np.stack([xs[cells % len(xs)], ys[cells // len(xs)]], axis=1)
         pts[0], pts[-1] = start, goal
         return self._pull_string(pts, clearance)
 

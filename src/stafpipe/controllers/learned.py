@@ -24,7 +24,17 @@ from stafpipe.sensing import Observation
 log = logging.getLogger(__name__)
 
 
-PLAN_SAFEGUARDS = ("home", "target_gap", "home_approach", "unblock", "extend_path", "end_home", "in_sight")
+PLAN_SAFEGUARDS = (
+    "home",
+    "target_gap",
+    "home_approach",
+    "unblock",
+    "extend_path",
+    "end_home",
+    "in_sight",
+    "reorder",
+    "in_world",
+)
 """Plan settings that only keep targets from crossing, crowding or running into robots already home (docs/staf.md): a
 policy trained without them runs with them, so they are not compared with its training record."""
 

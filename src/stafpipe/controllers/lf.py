@@ -59,7 +59,7 @@ class LFController(Controller):
         self.heading = math.radians(spec.team.heading_deg)
         start, goal = tuple(team.start[self.leader]), tuple(team.goal[self.leader])
         try:
-            self.path = Geometry.of(team.scenario).shortest_path(start, goal, self.radius + self.cfg.clearance_margin)
+            self.path = Geometry.of(team.scenario).path_to(start, goal, self.radius + self.cfg.clearance_margin)
         except ValueError:  # no path with the margin: fall back to the straight line (it will get stuck, honestly)
             self.path = np.array([start, goal])
         self.goal = team.goal

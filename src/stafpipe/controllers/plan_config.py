@@ -80,6 +80,17 @@ class PlanConfig:
     """A robot whose straight way to its target has crossed an obstacle for 2 s (a wall between them) aims instead at
     the path, up to 1 m from its own place on it, until its target is in sight again; false: it heads for its target
     through the wall and stays pressed against it, as trained. docs/staf.md."""
+    reorder: bool = True
+    """Where a subteam is a column (single file), the column's order follows the robots' order along the path: two
+    neighbours whose places are the other way round from where they stand (the one placed behind more than half a
+    spacing ahead), the other not yet past the single-file stretch, swap places and formation slots; false: the order
+    fixed at the split from the formation's slots, as trained. On a 1 m doorway the fixed order left a robot waiting
+    on its column place in the door mouth while the one meant to go before it stood behind it against the wall, for
+    ever (docs/staf.md)."""
+    in_world: bool = True
+    """Targets are kept inside the world's bounds, a radius and `margin` from its edge: a waiting subteam's column
+    reaching back behind a start near the edge (`extend_path`) put targets outside the world, and robots drove into
+    its edge; false: as trained (docs/staf.md)."""
     unblock: bool = True
     """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
     ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""

@@ -86,3 +86,32 @@ def unblocked_order(order: list[np.ndarray], progress: np.ndarray, lateral: np.n
     if not blocked_ways(progress, lateral, order, radius):
         return order
     return list(min(permutations(order), key=lambda o: blocked_ways(progress, lateral, list(o), radius)))
+
+
+def column_rank(slots: np.ndarray) -> np.ndarray:
+    """(k,) each robot's place in its subteam's column (0 at the front) from its unit-spacing formation slot (k, 2):
+    the slot furthest ahead first, then from left to right, so that blending from the formation does not cross
+    ways."""
+    rank = np.empty(len(slots), dtype=int)
+    rank[np.lexsort((-slots[:, 1], -np.round(slots[:, 0], 6)))] = np.arange(len(slots))
+    return rank
+
+
+def follow_order(rank: np.ndarray, progress: np.ndarray, margin: float, until: float = np.inf) -> np.ndarray:
+    """`rank` (k,) with each pair of neighbours in the column swapped while the one placed behind stands more than
+    `margin` ahead of the other along the path (`progress` (k,)) and the other has not yet come to `until` (the end
+    of the single-file stretch: robots leaving it spread back into their formation and keep their order): the
+    column's order becomes the robots' own, so that no robot has to pass another in single file (`plan.reorder`).
+    A copy."""
+    by_place = np.argsort(rank)
+    swapped = True
+    while swapped:  # bubble passes: a few robots, each swap removes one inversion, so it ends
+        swapped = False
+        for i in range(len(by_place) - 1):
+            a, b = by_place[i], by_place[i + 1]
+            if progress[b] > progress[a] + margin and progress[a] < until:
+                by_place[i], by_place[i + 1] = b, a
+                swapped = True
+    out = np.empty_like(rank)
+    out[by_place] = np.arange(len(rank))
+    return out

@@ -21,7 +21,14 @@ import numpy as np
 
 from stafpipe.controllers import plan_geometry as geo
 from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, SIGHT_WAIT, WAY_CLEARANCE, PlanConfig
-from stafpipe.controllers.plan_geometry import extent, lateral_clearance, separated, unit_slots
+from stafpipe.controllers.plan_geometry import (
+    column_rank,
+    extent,
+    follow_order,
+    lateral_clearance,
+    separated,
+    unit_slots,
+)
 from stafpipe.formations import assign_slots
 from stafpipe.geometry import PathFrame, obstacle_distance
 
@@ -105,6 +112,7 @@ class StafPlan:
         self.merging = False
         self.hold: list[np.ndarray | None] = [None]
         self.file_weights = [self.file_weight]  # per subteam: where it walks in single file
+        self.ranks = [column_rank(self.slots[0])]  # per subteam: each robot's place in its column (0: the front)
         self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
         self.targets = self.goal.copy()
@@ -128,6 +136,9 @@ class StafPlan:
             targets = separated(targets, 2 * self.radius + self.cfg.target_gap)
         if self.cfg.in_sight:
             targets = self._in_sight(pos, targets, dt)
+        if self.cfg.in_world:
+            w, keep = self.scenario.spec.world, self.radius + self.cfg.margin
+            targets = np.clip(targets, [w.xmin + keep, w.ymin + keep], [w.xmax - keep, w.ymax - keep])
         return targets
 
     def _in_sight(self, pos: np.ndarray, targets: np.ndarray, dt: float) -> np.ndarray:
@@ -171,6 +182,8 @@ class StafPlan:
             return self._home(dt)
         self._release(progress)
         self._advance(progress, dt)
+        if self.cfg.reorder:
+            self._follow_order(progress)
         if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
             self._finish_regroup(pos)
             return self._home(dt)
@@ -199,7 +212,7 @@ class StafPlan:
         if self.cfg.unblock:  # unless a waiting robot stands in the way of one that goes before it
             teams = geo.unblocked_order(teams, progress, lateral, self.radius)
         anchors: list[float] = []
-        self.order, self.slots, self.file_weights = [], [], []
+        self.order, self.slots, self.file_weights, self.ranks = [], [], [], []
         last_depth = 0.0
         for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
             unit = unit_slots(self.kind, len(idx), self.angle)
@@ -217,6 +230,7 @@ class StafPlan:
             perm = assign_slots(pos[idx], unit * self.spacing @ np.array([[c, s], [-s, c]]) + point)
             self.order.append(idx)
             self.slots.append(unit[perm])  # robot idx[k] takes slot perm[k]
+            self.ranks.append(column_rank(self.slots[-1]))
             anchors.append(a)
             last_depth = depth
         self.labels = np.zeros(self.n, dtype=int)
@@ -423,13 +437,24 @@ class StafPlan:
                 self.targets[idx] = (1 - weight) * self.targets[idx] + weight * self._column(j)
 
     def _column(self, j: int) -> np.ndarray:
-        """Subteam j as a column along the path centred on its anchor, at the team's spacing: the robot whose slot is
-        furthest ahead first (then from left to right), so that blending from the formation does not cross ways."""
-        slots = self.slots[j]
-        rank = np.empty(len(slots), dtype=int)
-        rank[np.lexsort((-slots[:, 1], -np.round(slots[:, 0], 6)))] = np.arange(len(slots))
-        offsets = ((len(slots) - 1) / 2 - rank) * self.spacing
+        """Subteam j as a column along the path centred on its anchor, at the team's spacing, in `ranks[j]`'s order
+        (`column_rank`, then `_follow_order`)."""
+        offsets = ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
         return self.frame.at(self.anchor[j] + offsets)[0]
+
+    def _follow_order(self, progress: np.ndarray) -> None:
+        """Moving subteams that are a column take their robots' order along the path (`plan.reorder`): two robots
+        that swap places in the column swap their formation slots too, so that the column spreads back into the
+        formation without crossing ways."""
+        for j, idx in enumerate(self.order):
+            if self.hold[j] is not None or self._file_weight(j) < 1.0:
+                continue
+            whole = np.flatnonzero(self.file_weights[j] >= 1.0)  # where it is a column
+            rank = follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds)
+            if (rank != self.ranks[j]).any():
+                by_place = np.argsort(self.ranks[j])  # the robot (row) at each place before
+                self.slots[j] = self.slots[j][by_place[rank]]
+                self.ranks[j] = rank
 
     def _file_weight(self, j: int) -> float:
         """How far subteam j is turned into a column (0..1): the largest single-file weight along its column."""
