@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 import pytest
 
 from conftest import job_dirs
+from stafpipe.controllers.base import limit_approach
 from stafpipe.launch import launch
+from stafpipe.sensing import Observation
 
 
 def _results(workdir, *overrides) -> pd.DataFrame:
@@ -29,3 +32,65 @@ def test_lf_gets_stuck_in_the_corridor_without_collisions(workdir) -> None:
     r = _results(workdir, "scenario.time_limit=60").iloc[0]
     assert r.collisions == 0  # the avoidance caps approach speeds: robots stop short of walls and of each other
     assert r.sr < 1.0  # no subteaming, no adaptation: the outer robots wait at the wall (STAF Section 4)
+
+
+def _capped_robot_by_robot(v, obs, radius, avoid_distance, avoid_gain, stop_gap):
+    """The approach cap as it was written before batching, robot by robot and cap by cap (robots by index, then the
+    wall): the reference."""
+    out = v.copy()
+    dist = np.linalg.norm(obs.rel_position, axis=-1)
+    gaps = dist - 2 * radius
+    close = obs.neighbours & (gaps < avoid_distance)
+    unit = obs.rel_position / np.maximum(dist, 1e-9)[..., None]
+    o_dir = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
+    for i in range(len(v)):
+        caps = [(unit[i, j], gaps[i, j]) for j in np.flatnonzero(close[i])]
+        if obs.obstacle_distance[i] < avoid_distance:
+            caps.append((o_dir[i], obs.obstacle_distance[i]))
+        for normal, gap in caps:
+            excess = float(out[i] @ normal) - avoid_gain * (gap - stop_gap)
+            if excess > 0:
+                out[i] -= excess * normal
+    return out
+
+
+def test_the_approach_cap_of_a_batch_is_each_worlds_bit_for_bit() -> None:
+    """`limit_approach` on a batch of worlds gives, in every world, exactly the bits of the cap applied robot by robot
+    (L&F and the `avoiding` teacher cap all worlds in one call; results must not depend on the batch): crowded random
+    teams, walls close by; a robot with one cap approaches no faster than it allows afterwards."""
+    rng = np.random.default_rng(7)
+    b, n, radius, reach, gain, stop = 6, 7, 0.2, 0.3, 2.0, 0.02
+    pos = rng.uniform(0.0, 2.0, (b, n, 2))
+    rel = pos[:, None, :, :] - pos[:, :, None, :]
+    neighbours = ~np.eye(n, dtype=bool)[None].repeat(b, 0)
+    wall = rng.normal(size=(b, n, 2)) * 0.3
+    wall_gap = rng.uniform(0.0, 0.5, (b, n))
+    zeros = np.zeros((b, n, 2))
+    obs = Observation(
+        pos,
+        zeros,
+        np.zeros((b, n)),
+        zeros,
+        wall,
+        wall_gap,
+        neighbours,
+        rel,
+        np.zeros((b, n, n, 2)),
+        np.zeros(b),
+        np.zeros((b, 0, 4)),
+        neighbours,
+    )
+    v = rng.normal(size=(b, n, 2))
+    batch = limit_approach(v, obs, radius, reach, gain, stop)
+    for w in range(b):
+        one = obs.world(w)
+        assert np.array_equal(batch[w], _capped_robot_by_robot(v[w], one, radius, reach, gain, stop))
+        assert np.array_equal(batch[w], limit_approach(v[w], one, radius, reach, gain, stop))
+    assert not np.array_equal(batch, v)  # the cap acted
+    gaps = np.linalg.norm(rel, axis=-1) - 2 * radius
+    toward = np.einsum("bid,bijd->bij", batch, rel / np.maximum(np.linalg.norm(rel, axis=-1), 1e-9)[..., None])
+    close = neighbours & (gaps < reach)
+    alone = (close.sum(-1) == 1) & (wall_gap >= reach)  # one cap only: it holds afterwards (caps in turn may not)
+    assert alone.any()
+    held = close & alone[..., None]
+    assert (toward[held] <= gain * (gaps[held] - stop) + 1e-9).all()

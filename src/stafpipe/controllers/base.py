@@ -125,26 +125,26 @@ def limit_approach(
 ) -> np.ndarray:
     """Collision avoidance shared by the classical methods: towards any robot or obstacle closer than `avoid_distance`
     (surface to surface), the approach speed is capped at avoid_gain x (gap - stop_gap), so robots slide along and
-    stop short of contact."""
-    v = v.copy()
+    stop short of contact. `v` (.., n, 2) and `obs` of one world or of a batch of them (the same leading shape)."""
+    v = np.array(v, dtype=float)
     rel = obs.rel_position  # [i, j] = p_j - p_i
     dist = np.linalg.norm(rel, axis=-1)
     gaps = dist - 2 * radius
     close = obs.neighbours & (gaps < avoid_distance)
     near_wall = obs.obstacle_distance < avoid_distance
-    rows = np.flatnonzero(close.any(axis=1) | near_wall)  # only these robots have anything to slide along
-    if not len(rows):
+    if not (close.any() or near_wall.any()):
         return v
     unit = rel / np.maximum(dist, 1e-9)[..., None]
     o_dir = obs.obstacle / np.maximum(np.linalg.norm(obs.obstacle, axis=-1, keepdims=True), 1e-9)
-    for i in rows:
-        js = np.flatnonzero(close[i])
-        normals, limits = list(unit[i, js]), list(gaps[i, js])
-        if near_wall[i]:
-            normals.append(o_dir[i])
-            limits.append(obs.obstacle_distance[i])
-        for n_vec, gap in zip(normals, limits, strict=True):  # in this order: robots by index, then the wall
-            excess = float(v[i] @ n_vec) - avoid_gain * (gap - stop_gap)
-            if excess > 0:
-                v[i] -= excess * n_vec
+    # each robot's caps in this order: robots by index, then the wall; all robots (and worlds) at once, one cap each
+    # step. The dot product as a stacked matmul: bit for bit what `v[i] @ n` gives for one robot (numpy's 1-D dot
+    # fuses the multiply-add; an elementwise sum does not), so results do not depend on how many worlds are batched
+    for normal, gap, active in [(unit[..., j, :], gaps[..., j], close[..., j]) for j in range(close.shape[-1])] + [
+        (o_dir, obs.obstacle_distance, near_wall)
+    ]:
+        if not active.any():
+            continue
+        excess = (v[..., None, :] @ normal[..., :, None])[..., 0, 0] - avoid_gain * (gap - stop_gap)
+        cut = active & (excess > 0)
+        v = np.where(cut[..., None], v - excess[..., None] * normal, v)
     return v

@@ -102,9 +102,7 @@ def teacher_actions(
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
     world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
     if kind in ("avoiding", "sliding"):
-        world = np.stack(
-            [limit_approach(world[w], obs.world(w), radius, AVOID_DISTANCE, AVOID_GAIN) for w in range(len(world))]
-        )
+        world = limit_approach(world, obs, radius, AVOID_DISTANCE, AVOID_GAIN)  # every world at once
         if kind == "sliding" and drive == "diff_drive":
             world = forward_capped(world, obs, radius)
     elif kind == "orca":
