@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -75,10 +76,11 @@ class LFController(Controller):
         worlds = np.flatnonzero(active)
         if not len(worlds):
             return out
-        radii = {self._worlds[w].radius for w in worlds.tolist()}
+        copies = [cast(LFController, self._worlds[w]) for w in worlds.tolist()]
+        radii = {c.radius for c in copies}
         if len(radii) > 1:  # robots of different sizes in one batch: world by world
             return super().act_worlds(obs, active)
-        v = np.stack([self._worlds[w]._command(obs.world(w)) for w in worlds.tolist()])
+        v = np.stack([c._command(obs.world(w)) for c, w in zip(copies, worlds.tolist(), strict=True)])
         batch = Observation(*(x[worlds] for x in obs))
         out[worlds] = limit_approach(v, batch, radii.pop(), self.cfg.avoid_distance, self.cfg.avoid_gain)
         return out
