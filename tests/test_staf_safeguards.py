@@ -104,11 +104,16 @@ def test_a_column_placed_the_other_way_round_follows_its_robots(tmp_path) -> Non
         plan.hold[j], plan.anchor[j], plan.split_frac = None, s, 1.0  # moving, in file, slid into its subteam
         plan.file_weights[j][:] = 1.0
         plan.ranks[j] = np.arange(len(idx))  # robot idx[0] in front ...
+        slots = plan.slots[j].copy()
         behind = plan.frame.at(s - 1.0 * np.arange(len(idx))[::-1])[0]  # ... but standing at the back
         pos[idx] = behind
         targets = plan._step(pos, 0.0)[idx]
         order = np.argsort(-plan.frame.progress(targets))  # robots from the front target to the back one
         assert (order.tolist() == list(range(len(idx) - 1, -1, -1))) == reorder
+        # the formation slots go with the places: the column spreads back into the formation in the same order
+        assert np.array_equal(column_rank(slots), np.arange(len(idx)))  # (the line's slots, in that order)
+        assert np.array_equal(column_rank(plan.slots[j]), plan.ranks[j])
+        assert np.array_equal(plan.slots[j], slots) != reorder
 
 
 def test_targets_stay_inside_the_world(tmp_path) -> None:

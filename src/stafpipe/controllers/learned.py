@@ -35,8 +35,8 @@ PLAN_SAFEGUARDS = (
     "reorder",
     "in_world",
 )
-"""Plan settings that only keep targets from crossing, crowding or running into robots already home (docs/staf.md): a
-policy trained without them runs with them, so they are not compared with its training record."""
+"""Plan settings that only keep targets from crossing, crowding, running into robots already home or leaving the world
+(docs/staf.md): a policy trained without them runs with them, so they are not compared with its training record."""
 
 
 def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:

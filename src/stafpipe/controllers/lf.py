@@ -71,7 +71,7 @@ class LFController(Controller):
 
     def act_worlds(self, obs: Observation, active: np.ndarray) -> np.ndarray:
         """As `act` in every active world, the collision avoidance of all of them in one call (world by world it was
-        a sixth of an L&F evaluation's time; the same bits either way, `limit_approach`)."""
+        a sixth of an L&F evaluation's time under cProfile; the same bits either way, `limit_approach`)."""
         out = np.zeros(obs.position.shape)
         worlds = np.flatnonzero(active)
         if not len(worlds):
