@@ -148,6 +148,30 @@ def test_sliding_teacher_caps_where_a_differential_drive_moves_not_only_where_it
     assert capped_cmd @ plain_cmd > 0
     holonomic, _ = approach("sliding", "holonomic")
     assert holonomic == pytest.approx(plain, abs=1e-9)  # a holonomic robot moves as commanded: nothing to scale
+    # `capped`: the same second cap, on `avoiding`'s command (this aim is not towards a wall, so it equals `sliding`)
+    capped_only, capped_only_cmd = approach("capped", "diff_drive")
+    assert capped_only == pytest.approx(cap, abs=1e-6) and np.allclose(capped_only_cmd, capped_cmd)
+
+
+def test_capped_teacher_is_avoiding_on_holonomic_robots_and_never_moves_the_aim_off_a_wall() -> None:
+    """`capped` adds only the differential drive's second cap to `avoiding`: on holonomic robots it is `avoiding`
+    exactly, and a slot in the wall ahead is aimed at (braked for), not moved along the wall as `sliding` does."""
+    sc = load_named_scenario("corridor")
+    worlds = Worlds([sc], SensingConfig(position_noise=0.0))
+    worlds.reset([0])
+    worlds.pos[0, 0] = [12.0 - 0.2 - 0.5, 9.0]  # half a metre in front of the upper wall block's face (x = 12)
+    obs = worlds.observe()
+    aim = np.zeros_like(obs.position)
+    aim[0, 0] = [2.0, 1.0]  # 1.5 m into the wall, 1 m along it
+    expect = teacher_actions("avoiding", aim, obs, 0.2, 1.0, 2.0, "holonomic")
+    assert np.array_equal(teacher_actions("capped", aim, obs, 0.2, 1.0, 2.0, "holonomic"), expect)
+
+    def into_wall(kind: str) -> float:
+        act = teacher_actions(kind, aim, obs, 0.2, 1.0, 2.0, "holonomic")
+        return float(rollout.commands(act, obs.heading, 1.0)[0, 0] @ np.array([1.0, 0.0]))
+
+    # 0.5 m from the wall nothing brakes yet: `capped` heads on at the slot, `sliding` at the margin line short of it
+    assert into_wall("capped") > into_wall("sliding") + 0.1
 
 
 @pytest.mark.slow  # two plans through the corridor: about 5 s on 2 cores

@@ -82,8 +82,9 @@ class ImitationConfig:
     samples are kept and the fit continues (Ross, Gordon and Bagnell, AISTATS 2011)."""
     teacher: str = "proportional"
     """`proportional` (a step to the target), `avoiding` (the same, with the classical methods' approach cap near
-    robots and obstacles), `sliding` (`avoiding` aiming no closer to the closest obstacle than a margin) or `orca`,
-    learning/teachers.py."""
+    robots and obstacles), `sliding` (`avoiding` aiming no closer to the closest obstacle than a margin, and on a
+    differential drive capping the motion the drive makes as well), `capped` (`avoiding` with that second cap only) or
+    `orca`, learning/teachers.py."""
     gain: float = 2.0
     """The teacher's gain: a step of min(1, gain x distance) of top speed towards the target."""
     noise: float = 0.3

@@ -13,6 +13,8 @@
   times cos(heading error), drives.py): a robot turning round towards its aim drives along its heading meanwhile,
   and two neighbours turning round the opposite ways drove into each other (measured: seed-777 map 1, a line of 8
   whose start noise put two robots 0.34 m apart; the command pointed away from the neighbour, the heading at it).
+- `capped`: `avoiding` with `sliding`'s second cap on a differential drive (on the motion the drive makes), without
+  moving the aim off the wall: on holonomic robots it is `avoiding` itself.
 - `orca`: the same step as the preferred velocity of ORCA (controllers/orca.py; van den Berg et al., ISRR 2011) with
   `method=zhu`'s settings (horizon 1 s, margin 0.1 m, recovery 0.1 s): reciprocal avoidance of every sensed robot and
   the nearest obstacle point.
@@ -30,7 +32,7 @@ from stafpipe.controllers.zhu import ZhuConfig
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
-TEACHERS = ("proportional", "avoiding", "sliding", "orca")
+TEACHERS = ("proportional", "avoiding", "sliding", "capped", "orca")
 SLIDE_MARGIN = PlanConfig().margin
 """m between a robot's surface and the closest obstacle that the `sliding` teacher's aim keeps: the plan's default
 `margin` between a formation's outer robots and the walls (0.15 m)."""
@@ -101,9 +103,9 @@ def teacher_actions(
         to_aim = off_the_wall(to_aim, obs)
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
     world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
-    if kind in ("avoiding", "sliding"):
+    if kind in ("avoiding", "sliding", "capped"):
         world = limit_approach(world, obs, radius, AVOID_DISTANCE, AVOID_GAIN)  # every world at once
-        if kind == "sliding" and drive == "diff_drive":
+        if kind in ("sliding", "capped") and drive == "diff_drive":
             world = forward_capped(world, obs, radius)
     elif kind == "orca":
         world = np.stack(
