@@ -88,6 +88,11 @@ def test_teachers_step_to_the_aim_and_the_avoiding_one_stops_short_of_a_wall() -
     gap = obs.obstacle_distance[0, 0]
     assert gap == pytest.approx(0.05, abs=1e-6)
     assert capped[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 2.0 * (gap - 0.02) + 1e-9
+    # a stop gap of 0.04 m: the approach is capped at 2 x (0.05 - 0.04), exactly (the free step heads into the wall)
+    wider = teacher_actions("avoiding", far, obs, 0.2, 1.0, 2.0, "holonomic", stop_gap=0.04)
+    normal = obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])
+    assert wider[0, 0] @ normal == pytest.approx(2.0 * (gap - 0.04), abs=1e-6)
+    assert capped[0, 0] @ normal == pytest.approx(2.0 * (gap - 0.02), abs=1e-6)
     # ORCA's teacher: 5 cm from the wall is inside its 0.1 m margin, so it may not approach the wall at all
     orca = teacher_actions("orca", far, obs, 0.2, 1.0, 2.0, "holonomic")
     assert orca[0, 0] @ (obs.obstacle[0, 0] / np.linalg.norm(obs.obstacle[0, 0])) <= 1e-6

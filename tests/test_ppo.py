@@ -349,3 +349,6 @@ def test_drive_input_and_direction_weight_are_checked() -> None:
     with pytest.raises(StafpipeError, match=r"direction_weight"):
         TrainPPOConfig(imitation=ImitationConfig(direction_weight=-1.0)).check()
     TrainPPOConfig(method="staf", policy=PolicyConfig(drive_input=True)).check()
+    for gap in (-0.01, 0.35):  # below zero, or where the cap starts braking: never moves
+        with pytest.raises(StafpipeError, match=r"train_ppo.imitation.stop_gap"):
+            TrainPPOConfig(imitation=ImitationConfig(stop_gap=gap)).check()

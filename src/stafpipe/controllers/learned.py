@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from stafpipe.controllers.base import Controller, Event, TeamInfo
+from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import load_policy
@@ -140,6 +140,7 @@ class LearnedController(Controller):
                 self.max_speed,
                 self.cfg.proportional_gain,
                 robot.drive,
+                getattr(self.cfg, "stop_gap", STOP_GAP),
             )
         else:
             with torch.inference_mode():  # execution: no critic, no autograd bookkeeping

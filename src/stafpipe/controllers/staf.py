@@ -36,13 +36,15 @@ class StafMethodConfig:
     learning/teachers.py."""
     proportional_gain: float = 2.0
     """low_level other than learned: the step's gain (1/s)."""
+    stop_gap: float = 0.02
+    """low_level other than learned: the gap (m) its approach cap brakes to (as `train_ppo.imitation.stop_gap`)."""
     plan: PlanConfig = field(default_factory=PlanConfig)
     """Subteams, sequencing and regroup; keep the settings the policy was trained with (its `made_by` records them)."""
 
     def check(self, key: str = "method") -> None:
         from stafpipe.learning.teachers import check_low_level
 
-        check_low_level(self.low_level, self.proportional_gain, key)
+        check_low_level(self.low_level, self.proportional_gain, key, self.stop_gap)
         self.plan.check(f"{key}.plan")
 
     def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:

@@ -87,6 +87,9 @@ class ImitationConfig:
     `orca`, learning/teachers.py."""
     gain: float = 2.0
     """The teacher's gain: a step of min(1, gain x distance) of top speed towards the target."""
+    stop_gap: float = 0.02
+    """m: the gap to robots and obstacles the teacher's approach cap brakes to (`avoiding`, `sliding`, `capped`);
+    0.02: the classical methods' (controllers/base.py STOP_GAP), the recipes before 2026-12-02 (third session)."""
     noise: float = 0.3
     """Standard deviation of the noise added to the teacher's actions while collecting (states off its own way)."""
     near_weight: float = 1.0
@@ -197,6 +200,9 @@ class TrainPPOConfig:
             "gain > 0, noise >= 0, lr > 0, near_weight > 0, direction_weight >= 0",
             (im.gain, im.noise, im.lr, im.near_weight, im.direction_weight),
         )
+        from stafpipe.learning.teachers import check_stop_gap
+
+        check_stop_gap(im.stop_gap, f"{key}.imitation.stop_gap")
         for name in ("wall_copies", "neighbour_copies"):
             value = getattr(im, name)
             require(0.0 <= value <= 1.0, f"{key}.imitation.{name}", "must be in [0, 1]", value)

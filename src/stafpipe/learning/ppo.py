@@ -144,7 +144,7 @@ def _teacher_samples(
 
     def labelled(f: Features, seen: Observation, to_aim: np.ndarray) -> np.ndarray:
         """Store one step's samples (features `f` of observation `seen`) with the teacher's actions as labels."""
-        act = teacher_actions(im.teacher, to_aim, seen, radius, top, im.gain, robot_drive)
+        act = teacher_actions(im.teacher, to_aim, seen, radius, top, im.gain, robot_drive, im.stop_gap)
         for store, x in ((own, f.own), (edge, f.edge), (mask, f.mask)):
             store.append(torch.from_numpy(x))
         target.append(torch.from_numpy(act.astype(np.float32)))

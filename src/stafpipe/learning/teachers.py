@@ -41,14 +41,23 @@ AVOID_DISTANCE, AVOID_GAIN = _LF.avoid_distance, _LF.avoid_gain
 ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = _ZHU.orca_horizon, _ZHU.orca_margin, _ZHU.orca_recovery
 
 
-def check_low_level(low_level: str, gain: float, key: str) -> None:
-    """A learned method's `low_level` (`learned` or a teacher here) and its `proportional_gain`, named under `key`."""
+def check_low_level(low_level: str, gain: float, key: str, stop_gap: float = STOP_GAP) -> None:
+    """A learned method's `low_level` (`learned` or a teacher here), its `proportional_gain` and `stop_gap`, named
+    under `key`."""
     from stafpipe.errors import require
 
     require(
         low_level in ("learned", *TEACHERS), f"{key}.low_level", f"must be one of {['learned', *TEACHERS]}", low_level
     )
     require(gain > 0, f"{key}.proportional_gain", "must be > 0", gain)
+    check_stop_gap(stop_gap, f"{key}.stop_gap")
+
+
+def check_stop_gap(stop_gap: float, key: str) -> None:
+    """A teacher's stop gap: at least 0 and short of where its braking starts (AVOID_DISTANCE), or it never moves."""
+    from stafpipe.errors import require
+
+    require(0.0 <= stop_gap < AVOID_DISTANCE, key, f"must be in [0, {AVOID_DISTANCE})", stop_gap)
 
 
 NEAR_WALL_GAP = AVOID_DISTANCE + 0.05
@@ -95,18 +104,20 @@ def teacher_actions(
     max_speed: float,
     gain: float,
     drive: str,
+    stop_gap: float = STOP_GAP,
 ) -> np.ndarray:
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
     vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs` of
-    robots with this `drive` (scenario robot.drive)."""
+    robots with this `drive` (scenario robot.drive). `stop_gap`: the gap (m) the approach cap brakes to (the classical
+    methods' 0.02 m by default; a larger one keeps an imitator's own errors short of contact, docs/staf.md)."""
     if kind == "sliding":
         to_aim = off_the_wall(to_aim, obs)
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)
     world = max_speed * gain * to_aim / np.maximum(1.0, gain * length)  # min(1, gain x distance) of top speed
     if kind in ("avoiding", "sliding", "capped"):
-        world = limit_approach(world, obs, radius, AVOID_DISTANCE, AVOID_GAIN)  # every world at once
+        world = limit_approach(world, obs, radius, AVOID_DISTANCE, AVOID_GAIN, stop_gap)  # every world at once
         if kind in ("sliding", "capped") and drive == "diff_drive":
-            world = forward_capped(world, obs, radius)
+            world = forward_capped(world, obs, radius, stop_gap)
     elif kind == "orca":
         world = np.stack(
             [
@@ -123,10 +134,10 @@ robot whose forward motion is capped to nothing still turns round towards its ai
 its neighbour."""
 
 
-def forward_capped(world: np.ndarray, obs: Observation, radius: float) -> np.ndarray:
+def forward_capped(world: np.ndarray, obs: Observation, radius: float, stop_gap: float = STOP_GAP) -> np.ndarray:
     """World-frame commands (B, n, 2) of differential-drive robots scaled down so that the motion the drive makes
     from them, forward along the heading at |command| x max(cos(heading error), 0) (drives.diff_drive), keeps the
-    approach cap of `limit_approach` (AVOID_GAIN x (gap - STOP_GAP) within AVOID_DISTANCE) towards every sensed robot
+    approach cap of `limit_approach` (AVOID_GAIN x (gap - stop_gap) within AVOID_DISTANCE) towards every sensed robot
     and the closest obstacle; the direction, and so the turn, is kept."""
     heading = np.stack([np.cos(obs.heading), np.sin(obs.heading)], axis=-1)
     forward = np.maximum((world * heading).sum(-1), 0.0)  # |command| x max(cos(error), 0)
@@ -139,7 +150,7 @@ def forward_capped(world: np.ndarray, obs: Observation, radius: float) -> np.nda
     cosine = np.concatenate([closing, wall_closing[..., None]], axis=-1)
     limit = np.where(
         (allowed < AVOID_DISTANCE) & (cosine > 1e-9),
-        np.maximum(AVOID_GAIN * (allowed - STOP_GAP), 0.0) / np.maximum(cosine, 1e-9),
+        np.maximum(AVOID_GAIN * (allowed - stop_gap), 0.0) / np.maximum(cosine, 1e-9),
         np.inf,
     ).min(-1)  # the forward speed at which the closest-closing constraint is met exactly
     scale = np.where(forward > limit, np.maximum(limit / np.maximum(forward, 1e-9), MIN_COMMAND_SCALE), 1.0)
