@@ -114,8 +114,8 @@ class EvalConfig:
     """Free text written into every results row (column `label`): tells variants of one method apart in
     `stafpipe plot table` (e.g. the `staf_levels` ablation)."""
     batch: int = 0
-    """Episodes run at once, in parallel worlds of one batched world (one network call per step for all of them in
-    a learned method); 0: all of them, up to 50 and up to 5 M robot pairs (`stages.eval.auto_batch`: 5 worlds
+    """Episodes run at once, in parallel worlds of one batched world (a learned method's features and plans in one
+    pass); 0: all of them, up to 50 and up to 5 M robot pairs (`stages.eval.auto_batch`: 5 worlds
     of 1,000 robots). An episode's result does not depend on this (a test)."""
 
     def check(self, key: str = "eval") -> None:

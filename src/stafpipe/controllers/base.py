@@ -4,7 +4,7 @@ Evaluation, metrics and logging never special-case a method: they call `reset_wo
 batch, then `act_worlds` once per control step on the batch's (B, n, ...) observations, and read each world's
 `subteams`, `targets`, drained `events` and `episode_stats` through `world_view(w)`. A method written for one world
 implements `reset` and `act`; the base class runs one copy of it per world. A method that gains from the batch (the
-learned ones: one network call for every world) overrides the three batch methods.
+learned ones: features and plans of every world in one pass) overrides the three batch methods.
 """
 
 from __future__ import annotations
