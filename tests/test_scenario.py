@@ -3,8 +3,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stafpipe.geometry import Geometry, obstacle_distance, path_length
+from stafpipe.geometry import Geometry, grid_clearance, obstacle_distance, path_length
 from stafpipe.launch import launch
+from stafpipe.mapgen import MapsConfig, draw_map
 from stafpipe.paths import conf_dir
 from stafpipe.scenario import ScenarioError, build_scenario, load_scenario_file
 from stafpipe.world import Worlds
@@ -56,6 +57,25 @@ def test_narrowest_passage_is_derived_from_geometry(name, width) -> None:
     g = Geometry(sc)
     eta = g.passage_width(tuple(sc.spec.team.start), tuple(sc.spec.team.goal))
     assert eta == pytest.approx(width, abs=2.5 * g.resolution)
+
+
+@pytest.mark.parametrize("source", ["forest", "office_map", "field", "bollards"])
+def test_the_clearance_grid_is_the_distance_to_every_cell_exactly(source) -> None:
+    """`grid_clearance` leaves out capsules that cannot be a block's nearest: the grid must still be
+    `obstacle_distance` at every cell, to the bit, on a grid that does not split into whole blocks (W, H not
+    multiples of 8) and on maps of many obstacles."""
+    if source in ("field", "bollards"):
+        spec = draw_map(np.random.default_rng(5), MapsConfig(families=[source]), "t")
+    else:
+        spec = load_scenario_file(conf_dir() / "scenario" / f"{source}.yaml")
+    sc = build_scenario(spec)
+    w = sc.spec.world
+    xs, ys = np.arange(w.xmin + 0.03, w.xmax, 0.0713), np.arange(w.ymin + 0.03, w.ymax, 0.0713)
+    assert len(xs) % 8 and len(ys) % 8 and len(sc.capsules) > 8
+    cells = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None]), axis=-1).reshape(-1, 2)
+    expected = obstacle_distance(cells, sc).reshape(len(ys), len(xs))
+    assert np.array_equal(grid_clearance(xs, ys, sc), expected)
+    assert (expected == 0).any() and (expected > 1.0).any()  # inside obstacles and far from them
 
 
 def test_shortest_path_goes_around_an_obstacle() -> None:

@@ -47,11 +47,60 @@ def obstacle_distance(points: np.ndarray, scenario: Scenario) -> np.ndarray:
         chunk = points[start : start + 20_000]
         cp = closest_points(chunk, a, b)
         d[start : start + 20_000] = (np.linalg.norm(chunk[:, None, :] - cp, axis=-1) - r).min(axis=1)
+    return _inside_is_zero(d, points, scenario)
+
+
+def _inside_is_zero(d: np.ndarray, points: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """Distances (P,) to the capsules, 0 where a point lies inside a solid polygon or an occupied map cell."""
     for poly in scenario.polygons:
         d[MplPath(poly).contains_points(points)] = 0.0
     if scenario.occupancy is not None:  # inside a wall of a ROS map: its cells, not its outline, say so
         d[scenario.occupancy.contains(points)] = 0.0
     return np.maximum(d, 0.0)
+
+
+def grid_clearance(xs: np.ndarray, ys: np.ndarray, scenario: Scenario, block: int = 8) -> np.ndarray:
+    """`obstacle_distance` at every cell centre (H, W) of the grid xs (W,) x ys (H,), the same numbers computed
+    against fewer capsules: the cells are taken in blocks of `block` x `block`, and a capsule can be the nearest to a
+    cell of a block only if its distance from the block's centre is within twice the block's half-diagonal h of the
+    nearest capsule's (a distance moves by at most h between the centre and any cell of the block). Most blocks then
+    have one or two candidates instead of every capsule (40 generated maps: 50 -> 9 s, every cell the same)."""
+    a, b, r = capsule_arrays(scenario)
+    h_cells, w_cells = len(ys), len(xs)
+    if len(r) <= 4 or block <= 1 or h_cells < 2 or w_cells < 2:  # little to leave out
+        points = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None]), axis=-1).reshape(-1, 2)
+        return obstacle_distance(points, scenario).reshape(h_cells, w_cells)
+    rows, cols = -(-h_cells // block), -(-w_cells // block)
+    # each block's centre and half-diagonal, from the cells it holds (the last row and column of blocks may be short)
+    first_y, first_x = np.arange(rows) * block, np.arange(cols) * block
+    last_y, last_x = np.minimum(first_y + block, h_cells) - 1, np.minimum(first_x + block, w_cells) - 1
+    cy, hy = (ys[first_y] + ys[last_y]) / 2, (ys[last_y] - ys[first_y]) / 2
+    cx, hx = (xs[first_x] + xs[last_x]) / 2, (xs[last_x] - xs[first_x]) / 2
+    centres = np.stack(np.broadcast_arrays(cx[None, :], cy[:, None]), axis=-1).reshape(-1, 2)
+    half = np.hypot(hx[None, :], hy[:, None]).ravel()
+    to_centre = np.linalg.norm(centres[:, None, :] - closest_points(centres, a, b), axis=-1) - r  # (B, C)
+    near = to_centre <= to_centre.min(axis=1, keepdims=True) + 2 * half[:, None] + 1e-9
+    count = near.sum(axis=1)
+    # each block's candidates first, the rest of its row a repeat of its first (a repeat does not change a minimum)
+    order = np.argsort(~near, axis=1, kind="stable")
+    candidates = np.where(np.take_along_axis(near, order, axis=1), order, order[:, :1])
+    # the cells block by block (B, block * block, 2), the grid padded past its end to whole blocks (cut off after)
+    pad_x = xs[0] + np.arange(cols * block) * (xs[1] - xs[0])
+    pad_y = ys[0] + np.arange(rows * block) * (ys[1] - ys[0])
+    pad_x[:w_cells], pad_y[:h_cells] = xs, ys
+    cells = np.stack(np.broadcast_arrays(pad_x[None, :], pad_y[:, None]), axis=-1)
+    cells = cells.reshape(rows, block, cols, block, 2).transpose(0, 2, 1, 3, 4).reshape(rows * cols, block * block, 2)
+    d = np.empty(cells.shape[:2])
+    by_count = np.argsort(count, kind="stable")  # blocks with as many candidates together
+    for start in range(0, len(cells), 2_000):  # chunks keep the (blocks, cells, K, 2) temporary small
+        part = by_count[start : start + 2_000]
+        k = int(count[part].max())
+        ca, cb, cr = (x[candidates[part, :k]] for x in (a, b, r))
+        cp = closest_points(cells[part], ca, cb)
+        d[part] = (np.linalg.norm(cells[part][:, :, None, :] - cp, axis=-1) - cr[:, None, :]).min(axis=2)
+    d = d.reshape(rows, cols, block, block).transpose(0, 2, 1, 3).reshape(rows * block, cols * block)
+    points = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None]), axis=-1).reshape(-1, 2)
+    return _inside_is_zero(d[:h_cells, :w_cells].ravel(), points, scenario).reshape(h_cells, w_cells)
 
 
 _SHARED: dict[str, Geometry] = {}
@@ -100,9 +149,7 @@ class Geometry:
         w = self.scenario.spec.world
         xs = np.arange(w.xmin + self.resolution / 2, w.xmax, self.resolution)
         ys = np.arange(w.ymin + self.resolution / 2, w.ymax, self.resolution)
-        gx, gy = np.meshgrid(xs, ys)
-        clear = obstacle_distance(np.stack([gx.ravel(), gy.ravel()], axis=1), self.scenario)
-        return xs, ys, clear.reshape(gy.shape)
+        return xs, ys, grid_clearance(xs, ys, self.scenario)
 
     def _cell(self, point: tuple[float, float] | np.ndarray) -> tuple[int, int]:
         xs, ys, _ = self.grid
