@@ -300,11 +300,11 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
         )
         == 0
     )
-    made_by = {"train_ppo": {"plan": {"m": "2", "adapt": "geometric"}}, "sensing": {"radius": 3.0}}
+    made_by = {"train_ppo": {"plan": {"m": "2", "adapt": "nominal"}}, "sensing": {"radius": 3.0}}
     differ = checkpoint_mismatch(StafMethodConfig(), made_by)
     assert differ == {"method.sensing_radius": (2.0, 3.0)}
     run = StafMethodConfig()
-    run.plan.adapt = "nominal"
+    run.plan.adapt = "geometric"
     assert set(checkpoint_mismatch(run, made_by)) == {"method.plan.adapt", "method.sensing_radius"}
     assert checkpoint_mismatch(run, {}) == {}  # an old checkpoint that recorded nothing is not refused
 

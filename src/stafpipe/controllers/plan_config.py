@@ -23,11 +23,11 @@ class PlanConfig:
     m: str = "2"
     """Subteams: a fixed number (2: STAF Table 1, Table 2 and Fig. 4 divide every team into two) or `auto` (our
     extension: the smallest m whose subteams fit the narrowest passage at the smallest spacing, STAF Sec. 7)."""
-    adapt: str = "geometric"
-    """Formation adaptation in a narrow passage: `geometric` (the plan shrinks the subteam's spacing to the free width
-    ahead; what the shipped policy was trained on) or `nominal` (the plan keeps each subteam's formation at the
-    team's nominal spacing and the policy must deform it itself, as STAF Sec. 3 attributes to the intermediate GNN
-    under R^adp; measured worse, docs/staf.md "Learned adaptation")."""
+    adapt: str = "nominal"
+    """Formation adaptation in a narrow passage: `nominal` (the plan keeps each subteam's formation at the team's
+    nominal spacing and the policy deforms it itself, as STAF Sec. 3 attributes to the intermediate GNN under R^adp;
+    what the shipped policy was trained on since 2026-12-03) or `geometric` (the plan shrinks the subteam's spacing to
+    the free width ahead: our option for comparison, docs/staf.md "Learned adaptation")."""
     single_file: bool = True
     """Where a subteam's formation does not fit even at the smallest spacing (2r + min_gap; e.g. bollards 1.1 m
     apart, or five robots abreast in 2.4 m), the plan turns its slots into a column along the path (blended in over

@@ -58,23 +58,25 @@ class StafPolicy(PolicyNet):
             z = z + own[..., STAF_OWN : STAF_OWN + 1] * self.w_drive
         return z
 
+    def _message(self, diff: torch.Tensor) -> torch.Tensor:
+        """W^f (z_j - z_i) for each pair, diff = s_j - s_i (.., 9): z_j - z_i = W^z (s_j - s_i) (linear, so the bias
+        cancels), and W^f W^z is one 9 x hidden map, so each pair costs a 9-wide product instead of a 9- and a
+        hidden-wide one (the same function; the pairs are most of the network's work: docs/learning.md)."""
+        msg = diff @ (self.w_f.weight @ self.w_z.weight).T
+        if self.cfg.message == "relu":
+            msg = torch.relu(msg + self.b_msg)
+        return msg
+
     def embed(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """f (.., n, hidden): own (.., n, 6, or 7 with `drive_input`), edge (.., n, n, 9), mask (.., n, n)."""
         z = self._own_embedding(own)
-        dz = self.w_z(edge)  # W^z (s_j - s_i) = z_j - z_i (linear, so the bias cancels)
-        msg = self.w_f(dz)
-        if self.cfg.message == "relu":
-            msg = torch.relu(msg + self.b_msg)
-        return self.w_f(z) + (msg * mask[..., None].float()).sum(-2)
+        return self.w_f(z) + (self._message(edge) * mask[..., None].float()).sum(-2)
 
     def embed_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
         """`embed` on an edge list, for large teams: own (n, 6), receiver (E,) = i of each pair, diff (E, 9) = s_j -
         s_i."""
         z = self._own_embedding(own)
-        msg = self.w_f(self.w_z(diff))
-        if self.cfg.message == "relu":
-            msg = torch.relu(msg + self.b_msg)
-        return self.w_f(z).index_add(0, receiver, msg)
+        return self.w_f(z).index_add(0, receiver, self._message(diff))
 
     def _mean(self, f: torch.Tensor, own: torch.Tensor) -> torch.Tensor:
         mean = self.psi(f)
