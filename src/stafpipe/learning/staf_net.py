@@ -61,7 +61,8 @@ class StafPolicy(PolicyNet):
     def _message(self, diff: torch.Tensor) -> torch.Tensor:
         """W^f (z_j - z_i) for each pair, diff = s_j - s_i (.., 9): z_j - z_i = W^z (s_j - s_i) (linear, so the bias
         cancels), and W^f W^z is one 9 x hidden map, so each pair costs a 9-wide product instead of a 9- and a
-        hidden-wide one (the same function; the pairs are most of the network's work: docs/learning.md)."""
+        hidden-wide one (STAF Sec. 3's phi, the same function to float rounding; the pairs are most of the network's
+        work: docs/staf.md, printed vs used, row 3)."""
         msg = diff @ (self.w_f.weight @ self.w_z.weight).T
         if self.cfg.message == "relu":
             msg = torch.relu(msg + self.b_msg)
