@@ -167,6 +167,15 @@ def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
         z_i = wz @ s_i + net.b_z
         expect = wf @ z_i + sum(wf @ (wz @ edge[i, j]) for j in range(n) if mask[i, j])
         assert torch.allclose(f[i], expect, atol=1e-5)
+    # the shipped message (relu): each neighbour's W^f (z_j - z_i) + b through a ReLU before the sum
+    relu = StafPolicy(PolicyConfig(hidden=8))
+    torch.nn.init.normal_(relu.b_msg)
+    f = relu.embed(own, edge, mask)
+    wz, wf = relu.w_z.weight, relu.w_f.weight
+    for i in range(n):
+        z_i = wz @ torch.cat([torch.zeros(2), own[i], torch.ones(1)]) + relu.b_z
+        msgs = [torch.relu(wf @ (wz @ edge[i, j]) + relu.b_msg) for j in range(n) if mask[i, j]]
+        assert torch.allclose(f[i], wf @ z_i + sum(msgs), atol=1e-5)
     # execution (no critic) and the edge list of large teams give the training forward's action means
     full = StafPolicy(PolicyConfig(hidden=8))
     torch.nn.init.normal_(full.psi[2].weight)  # a residual starts at zero: give psi a say
