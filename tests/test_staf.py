@@ -380,6 +380,24 @@ def test_separated_pushes_close_targets_apart_and_leaves_the_rest() -> None:
     assert d.min() > 0.5 - 1e-6
 
 
+def test_separated_inside_bounds_pushes_apart_along_the_edge() -> None:
+    """Two targets clipped onto the world's edge 0.12 m apart (seen on a generated corridor: a waiting column's rear
+    clipped at x = 0.35): pushed apart inside the bounds they end >= the distance apart, where clipping after the
+    push brings them back closer."""
+    from stafpipe.controllers.plan_geometry import separated
+
+    low, high = np.array([0.35, 0.35]), np.array([10.0, 10.0])
+    pts = np.array([[0.42, 6.22], [0.35, 6.32], [3.0, 3.0]])
+    inside = separated(pts, 0.5, rounds=20, bounds=(low, high))
+    assert (inside >= low - 1e-12).all() and (inside <= high + 1e-12).all()
+    assert np.linalg.norm(inside[0] - inside[1]) > 0.5 - 1e-3 and np.allclose(inside[2], pts[2])
+    clipped_after = np.clip(separated(pts, 0.5, rounds=20), low, high)
+    assert np.linalg.norm(clipped_after[0] - clipped_after[1]) < 0.45
+    # along the edge itself the push is the same as without bounds: half each, along their line
+    on_edge = separated(np.array([[0.35, 1.0], [0.35, 1.3]]), 0.5, bounds=(low, high))
+    assert np.allclose(on_edge, [[0.35, 0.9], [0.35, 1.4]])
+
+
 def test_departure_home_gives_free_slots_to_robots_from_where_their_targets_are() -> None:
     sc = load_named_scenario("corridor")
     template = np.array([[0.0, -1.0], [0.0, 0.0], [0.0, 1.0]])

@@ -1,6 +1,7 @@
 """STAF's plan safeguards: robots held at the path's end start home (`plan.end_home`), a target behind a wall moves
 onto the path (`plan.in_sight`), a column takes its robots' order along the path (`plan.reorder`) and targets stay
-inside the world (`plan.in_world`)."""
+inside the world (`plan.in_world`, `plan.separate_in_world`), and a column longer than the way left to the goal
+still reaches the path's end (`plan.lead_past_end`)."""
 
 from __future__ import annotations
 
@@ -131,3 +132,33 @@ def test_targets_stay_inside_the_world(tmp_path) -> None:
             way = target - pos
             pos = pos + way * np.minimum(1.0, 0.1 / np.maximum(np.linalg.norm(way, axis=1, keepdims=True), 1e-9))
         assert (lowest >= sc.spec.world.xmin + keep - 1e-9) == in_world
+
+
+_DOOR_NEAR_GOAL = """
+name: door-near-goal
+world: {xmin: 0.0, ymin: 0.0, xmax: 28.29, ymax: 13.41}
+obstacles:
+  - box: {center: [20.045, 2.925], size: [0.463, 5.85]}
+  - box: {center: [20.045, 10.485], size: [0.463, 5.85]}
+team: {n: 12, formation: wedge, spacing: 1.0, start: [3.268, 6.705], goal: [25.022, 6.829], heading_deg: 0.0}
+time_limit: 144.9
+"""
+"""A 1.7 m door 5 m before the goal of a 12-robot wedge (a generated map on which the front subteam, a column of nine,
+stood still with its last robot in the door for the rest of the episode)."""
+
+
+@pytest.mark.parametrize("lead_past_end", [False, True])
+def test_a_column_longer_than_the_way_left_reaches_the_paths_end(tmp_path, lead_past_end) -> None:
+    """`plan.lead_past_end`: the column's front slots are cut short at the path's end, so its robots' mean progress
+    stops growing; counted from the anchor, the lead limit then held the anchor short of the end (no regroup, the
+    last robot in the door for ever); counted from the slots, the anchor reaches the end and the team gets home."""
+    (tmp_path / "door.yaml").write_text(_DOOR_NEAR_GOAL)
+    sc = build_scenario(load_scenario_file(tmp_path / "door.yaml"))
+
+    def nine_three(pos, goal, m):  # the split of the episodes that waited: robots 6, 8 and 10 behind
+        return np.isin(np.arange(len(pos)), [6, 8, 10]).astype(int)
+
+    cfg = PlanConfig(lead_past_end=lead_past_end)
+    tt, log, _ = ideal_run(sc, nine_three, steps=600, plan_cfg=cfg)
+    assert log["events"][0] == "split" and ("regroup" in log["events"]) == lead_past_end
+    assert math.isfinite(tt) == lead_past_end

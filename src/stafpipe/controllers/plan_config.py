@@ -91,6 +91,15 @@ class PlanConfig:
     """Targets are kept inside the world's bounds, a radius and `margin` from its edge: a waiting subteam's column
     reaching back behind a start near the edge (`extend_path`) put targets outside the world, and robots drove into
     its edge; false: as trained (docs/staf.md)."""
+    separate_in_world: bool = True
+    """With `in_world` and `target_gap`: targets are pushed apart inside the world's bounds (`separated(bounds=)`);
+    false: pushed apart first and clipped to the bounds after, as the shipped policy was trained, which could bring
+    two targets at the world's edge back to 0.12 m apart, and their robots into contact (docs/staf.md)."""
+    lead_past_end: bool = True
+    """A subteam's anchor leads its robots' mean progress by at most `max_lead` plus the length the path's end cuts
+    off its column's slots (`StafPlan._cut_at_end`): a column longer than the way left to the goal no longer holds
+    its anchor short of the end, where a robot still in the passage waited for ever (a 12-robot wedge through a door
+    5 m before its goal; docs/staf.md); false: `max_lead` alone, as trained."""
     unblock: bool = True
     """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
     ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""

@@ -18,12 +18,22 @@ def extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
     return float(np.ptp(slots[:, 0])) + 2 * radius, float(np.ptp(slots[:, 1])) + 2 * radius
 
 
-def separated(points: np.ndarray, distance: float, rounds: int = 3) -> np.ndarray:
+def separated(
+    points: np.ndarray,
+    distance: float,
+    rounds: int = 3,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """`points` (n, 2) with every pair closer than `distance` pushed apart along its line, half each (a few rounds
-    of pairwise projection; pairs found with a k-d tree, so large teams stay cheap)."""
+    of pairwise projection; pairs found with a k-d tree, so large teams stay cheap). `bounds` (low, high corners):
+    the points are kept inside them in every round, so a push out of the box is undone before the next round and
+    the pair is pushed apart along the box's edge instead (clipping only after separating brought two targets at a
+    world edge back to 0.12 m apart)."""
     from scipy.spatial import cKDTree
 
     out = np.array(points, dtype=float)
+    if bounds is not None:
+        out = np.clip(out, *bounds)
     for _ in range(rounds):
         pairs = cKDTree(out).query_pairs(distance - 1e-9, output_type="ndarray")
         if len(pairs) == 0:
@@ -35,6 +45,8 @@ def separated(points: np.ndarray, distance: float, rounds: int = 3) -> np.ndarra
         push = 0.5 * (distance - length) * unit
         np.add.at(out, i, push)
         np.add.at(out, j, -push)
+        if bounds is not None:
+            out = np.clip(out, *bounds)
     return out
 
 

@@ -132,13 +132,15 @@ class StafPlan:
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
         """Targets (n, 2) for robots at `pos` (n, 2) after one control step of `dt` seconds."""
         targets = self._step(pos, dt)
+        w, keep = self.scenario.spec.world, self.radius + self.cfg.margin
+        bounds = (np.array([w.xmin + keep, w.ymin + keep]), np.array([w.xmax - keep, w.ymax - keep]))
         if self.cfg.target_gap > 0:
-            targets = separated(targets, 2 * self.radius + self.cfg.target_gap)
+            inside = bounds if self.cfg.in_world and self.cfg.separate_in_world else None
+            targets = separated(targets, 2 * self.radius + self.cfg.target_gap, bounds=inside)
         if self.cfg.in_sight:
             targets = self._in_sight(pos, targets, dt)
         if self.cfg.in_world:
-            w, keep = self.scenario.spec.world, self.radius + self.cfg.margin
-            targets = np.clip(targets, [w.xmin + keep, w.ymin + keep], [w.xmax - keep, w.ymax - keep])
+            targets = np.clip(targets, *bounds)
         return targets
 
     def _in_sight(self, pos: np.ndarray, targets: np.ndarray, dt: float) -> np.ndarray:
@@ -361,7 +363,10 @@ class StafPlan:
             if self.hold[j] is not None:
                 continue
             s = self.anchor[j] + self.cfg.speed * dt
-            s = min(s, progress[idx].mean() + self.cfg.max_lead)
+            lead_from = progress[idx].mean()
+            if self.cfg.lead_past_end:  # column slots the path's end cuts short do not hold the anchor back
+                lead_from += self._cut_at_end(j)
+            s = min(s, lead_from + self.cfg.max_lead)
             if j > 0 and not self.merging:  # behind the subteam ahead, with room for both formations' depths
                 ahead_depth = self._depth(j - 1, self._spacing(j - 1, self.anchor[j - 1]))
                 own_depth = self._depth(j, self.spacing)
@@ -369,6 +374,16 @@ class StafPlan:
             elif j > 0 and self.cfg.home_approach > 0:  # merging: short of the slots taken by robots gone home
                 s = min(s, self._short_of_taken(j))
             self.anchor[j] = min(max(self.anchor[j], s), cap)
+
+    def _cut_at_end(self, j: int) -> float:
+        """Mean length (m) by which the path's end cuts short the column slots of subteam j (`_column` places them at
+        arc lengths past the end on the end point), weighted by how far the subteam is a column: its robots' mean
+        progress stays that far behind its anchor however well they keep their slots."""
+        weight = self._file_weight(j)
+        if weight == 0.0:
+            return 0.0
+        arcs = self.anchor[j] + ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
+        return weight * float(np.maximum(arcs - self.frame.length, 0.0).mean())
 
     def _short_of_taken(self, j: int) -> float:
         """The furthest subteam j's anchor may go while merging: its front `follow_gap` behind the nearest goal slot
