@@ -49,19 +49,20 @@ def test_robots_held_at_the_path_end_start_home(tmp_path, end_home) -> None:
     assert math.isfinite(tt) == end_home
 
 
-def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot() -> None:
+@pytest.mark.parametrize("wait", [2.0, 0.5])
+def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot(wait) -> None:
     """`plan.in_sight`: a robot beside the corridor's mouth whose target lies inside the corridor (the wall between
-    them) aims at the path instead once the target has been out of sight for 2 s, no more than 1 m ahead of its own
-    place on it; a robot that sees its target keeps it."""
+    them) aims at the path instead once the target has been out of sight for `plan.sight_wait` seconds, no more than
+    1 m ahead of its own place on it; a robot that sees its target keeps it."""
     sc = load_named_scenario("corridor")
-    team, plan = start_and_plan(sc, divider(), PlanConfig())
+    team, plan = start_and_plan(sc, divider(), PlanConfig(sight_wait=wait))
     (cx, cy), (w, h) = sc.spec.obstacles[1]["box"]["center"], sc.spec.obstacles[1]["box"]["size"]  # the upper wall
     outside = np.array([cx - w / 2 - 0.5, cy - h / 2 + 1.0])  # before the wall's face, above the corridor's mouth
     inside, _ = plan.frame.at(plan.frame.progress(outside[None])[0] + 3.0)
     pos, target = team.copy(), team.copy()  # the rest of the team stands on its targets
     pos[:2], target[:2] = [outside, inside - [0.5, 0.0]], [inside, inside + [0.5, 0.0]]
     assert obstacle_distance(pos[:2], sc).min() > sc.spec.robot.radius
-    for _ in range(19):  # 1.9 s out of sight: still its own target (a robot sliding round a bollard keeps it)
+    for _ in range(round(wait / 0.1) - 1):  # out of sight not yet long enough: still its own target
         assert plan._in_sight(pos, target, 0.1) == pytest.approx(target)
     out = plan._in_sight(pos, target, 0.1)
     assert out[1:] == pytest.approx(target[1:])  # in sight: unchanged

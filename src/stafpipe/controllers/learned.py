@@ -32,6 +32,7 @@ PLAN_SAFEGUARDS = (
     "extend_path",
     "end_home",
     "in_sight",
+    "sight_wait",
     "reorder",
     "in_world",
     "separate_in_world",

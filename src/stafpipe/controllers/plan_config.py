@@ -8,12 +8,10 @@ WAY_CLEARANCE = 0.05
 """m between a body and the obstacles along every way home before a subteam starts home short of the taken slots
 (`StafPlan._clear_ways`); chosen, not tuned: a little more than the 0.02 m at which the trainer counts a touch."""
 
-SIGHT_STEP, SIGHT_REACH, SIGHT_WAIT = 0.1, 1.0, 2.0
+SIGHT_STEP, SIGHT_REACH = 0.1, 1.0
 """m between the points checked along a robot's way to its target (a way that crosses a wall has one within half of
-this of it), how far along the path from the robot's own place a target out of sight may be put, and how many
-seconds it must have been out of sight first (`StafPlan._in_sight`); chosen, not tuned: 1 m is about a robot's
-spacing in a formation; a robot sliding round a bollard sees its target again within a second, one pressed against
-a wall never does (docs/staf.md)."""
+this of it), and how far along the path from the robot's own place a target out of sight may be put
+(`StafPlan._in_sight`); chosen, not tuned: 1 m is about a robot's spacing in a formation (docs/staf.md)."""
 
 
 @dataclass
@@ -87,6 +85,10 @@ class PlanConfig:
     fixed at the split from the formation's slots, as trained. On a 1 m doorway the fixed order left a robot waiting
     on its column place in the door mouth while the one meant to go before it stood behind it against the wall, for
     ever (docs/staf.md)."""
+    sight_wait: float = 2.0
+    """Seconds a robot's way to its target must have crossed an obstacle before it aims at the path instead
+    (`in_sight`): a robot sliding round a bollard sees its target again within a second, one pressed against a wall
+    never does; 0 (at once) pulled robots sliding round bollards onto the path into their neighbours (docs/staf.md)."""
     in_world: bool = True
     """Targets are kept inside the world's bounds, a radius and `margin` from its edge: a waiting subteam's column
     reaching back behind a start near the edge (`extend_path`) put targets outside the world, and robots drove into
@@ -111,7 +113,8 @@ class PlanConfig:
             self.m == "auto" or (self.m.isdigit() and 1 <= int(self.m) <= 4), f"{key}.m", "must be auto or 1-4", self.m
         )
         require(self.adapt in ("geometric", "nominal"), f"{key}.adapt", "must be geometric or nominal", self.adapt)
-        for name in ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp"):
+        lengths = ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp")
+        for name in (*lengths, "sight_wait"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
         require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from stafpipe.controllers import plan_geometry as geo
-from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, SIGHT_WAIT, WAY_CLEARANCE, PlanConfig
+from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, WAY_CLEARANCE, PlanConfig
 from stafpipe.controllers.plan_geometry import (
     column_rank,
     extent,
@@ -144,10 +144,10 @@ class StafPlan:
         return targets
 
     def _in_sight(self, pos: np.ndarray, targets: np.ndarray, dt: float) -> np.ndarray:
-        """`targets`, each one the robot has not seen for `SIGHT_WAIT` seconds (its straight way crosses an obstacle)
-        replaced by the path's point at the target's arc length, held within `SIGHT_REACH` of the robot's own (the
-        path keeps clear of obstacles, so the robot goes round the wall along it). A robot sliding round a bollard
-        sees its target again sooner, and keeps it."""
+        """`targets`, each one the robot has not seen for `plan.sight_wait` seconds (its straight way crosses an
+        obstacle) replaced by the path's point at the target's arc length, held within `SIGHT_REACH` of the robot's
+        own (the path keeps clear of obstacles, so the robot goes round the wall along it). A robot sliding round a
+        bollard sees its target again sooner, and keeps it."""
         way = targets - pos
         length = np.linalg.norm(way, axis=1)
         # a way inside the free disc around the robot is in sight: only the others are checked point by point (two
@@ -158,7 +158,7 @@ class StafPlan:
             samples = pos[blocked, None] + np.linspace(0.0, 1.0, k)[None, :, None] * way[blocked, None]
             blocked[blocked] = (self.geometry.clearance(samples) < SIGHT_STEP / 2).any(axis=1)
         self.unseen = np.where(blocked, self.unseen + dt, 0.0)
-        lost = self.unseen >= SIGHT_WAIT - 1e-9
+        lost = self.unseen >= self.cfg.sight_wait - 1e-9
         if not lost.any():
             return targets
         own = self.frame.progress(pos[lost])
