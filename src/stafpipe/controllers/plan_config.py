@@ -85,10 +85,12 @@ class PlanConfig:
     fixed at the split from the formation's slots, as trained. On a 1 m doorway the fixed order left a robot waiting
     on its column place in the door mouth while the one meant to go before it stood behind it against the wall, for
     ever (docs/staf.md)."""
-    sight_wait: float = 2.0
+    sight_wait: float = 1.0
     """Seconds a robot's way to its target must have crossed an obstacle before it aims at the path instead
     (`in_sight`): a robot sliding round a bollard sees its target again within a second, one pressed against a wall
-    never does; 0 (at once) pulled robots sliding round bollards onto the path into their neighbours (docs/staf.md)."""
+    never does; 0 (at once) pulled robots sliding round bollards onto the path into their neighbours, and 2 s (the
+    shipped policy's training, before 2026-12-03) left an outer robot at a passage's mouth pressed against the wall's
+    face until it turned into the corner. 1 s: chosen on 40 validation maps (docs/staf.md)."""
     in_world: bool = True
     """Targets are kept inside the world's bounds, a radius and `margin` from its edge: a waiting subteam's column
     reaching back behind a start near the edge (`extend_path`) put targets outside the world, and robots drove into
