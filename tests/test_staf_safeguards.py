@@ -18,6 +18,13 @@ from stafpipe.highlevel.infer import divider
 from stafpipe.scenario import build_scenario, load_scenario_file
 from stafpipe.stages.train_ppo import load_named_scenario
 
+
+def _map(tmp_path, text: str):
+    """A scenario from the YAML `text`, read as a user's scenario file is."""
+    (tmp_path / "map.yaml").write_text(text)
+    return build_scenario(load_scenario_file(tmp_path / "map.yaml"))
+
+
 _EXIT_TURN = """
 name: exit-turn
 world: {xmin: 0.0, ymin: 0.0, xmax: 18.26, ymax: 11.22}
@@ -35,8 +42,7 @@ time_limit: 120.0
 def test_robots_held_at_the_path_end_start_home(tmp_path, end_home) -> None:
     """`plan.end_home`: where the narrow stretch reaches to the path's end, the front subteam's rear robots (a column
     of five) can never pass it; with end_home they start for home from their slots once they stand on them."""
-    (tmp_path / "exit.yaml").write_text(_EXIT_TURN)
-    sc = build_scenario(load_scenario_file(tmp_path / "exit.yaml"))
+    sc = _map(tmp_path, _EXIT_TURN)
 
     def five_three(pos, goal, m):  # the split of the episode that waited: robots 3-7 in front, 0-2 behind
         return (np.arange(len(pos)) < 3).astype(int)
@@ -95,8 +101,7 @@ def test_a_column_placed_the_other_way_round_follows_its_robots(tmp_path) -> Non
     """`plan.reorder`: a subteam in single file (five robots abreast do not fit the 3 m corridor) whose column order
     is the reverse of where its robots stand gets targets in their own order, so no robot has to pass another;
     without it the front target goes to the robot at the back."""
-    (tmp_path / "exit.yaml").write_text(_EXIT_TURN)
-    sc = build_scenario(load_scenario_file(tmp_path / "exit.yaml"))
+    sc = _map(tmp_path, _EXIT_TURN)
     for reorder in (False, True):
         pos, plan = start_and_plan(sc, _five_behind, PlanConfig(reorder=reorder))
         plan.step(pos, 0.1)
@@ -121,8 +126,7 @@ def test_a_column_placed_the_other_way_round_follows_its_robots(tmp_path) -> Non
 def test_targets_stay_inside_the_world(tmp_path) -> None:
     """`plan.in_world`: behind a start 1.5 m from the world's edge the rear subteam's column (five robots) reaches
     back beyond the edge; with in_world every target keeps a radius and the margin from it."""
-    (tmp_path / "exit.yaml").write_text(_EXIT_TURN)
-    sc = build_scenario(load_scenario_file(tmp_path / "exit.yaml"))
+    sc = _map(tmp_path, _EXIT_TURN)
     keep = sc.spec.robot.radius + PlanConfig().margin
     for in_world in (False, True):
         pos, plan = start_and_plan(sc, _five_behind, PlanConfig(in_world=in_world))
@@ -153,8 +157,7 @@ def test_a_column_longer_than_the_way_left_reaches_the_paths_end(tmp_path, lead_
     """`plan.lead_past_end`: the column's front slots are cut short at the path's end, so its robots' mean progress
     stops growing; counted from the anchor, the lead limit then held the anchor short of the end (no regroup, the
     last robot in the door for ever); counted from the slots, the anchor reaches the end and the team gets home."""
-    (tmp_path / "door.yaml").write_text(_DOOR_NEAR_GOAL)
-    sc = build_scenario(load_scenario_file(tmp_path / "door.yaml"))
+    sc = _map(tmp_path, _DOOR_NEAR_GOAL)
 
     def nine_three(pos, goal, m):  # the split of the episodes that waited: robots 6, 8 and 10 behind
         return np.isin(np.arange(len(pos)), [6, 8, 10]).astype(int)

@@ -57,6 +57,8 @@ class StafPlan:
         """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are
         alike."""
         self.frame = PathFrame(path, extend=cfg.extend_path)
+        w, keep = spec.world, self.radius + cfg.margin  # `in_world`: targets a radius and the margin off its edge
+        self.bounds = (np.array([w.xmin + keep, w.ymin + keep]), np.array([w.xmax - keep, w.ymax - keep]))
         # the way into the goal area (the path's chord over its last 2 m): robots going home enter their slots along it
         chord = self.frame.path[-1] - self.frame.at(max(0.0, self.frame.length - 2.0))[0]
         self.way_in = chord / max(float(np.linalg.norm(chord)), 1e-9)
@@ -132,15 +134,13 @@ class StafPlan:
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
         """Targets (n, 2) for robots at `pos` (n, 2) after one control step of `dt` seconds."""
         targets = self._step(pos, dt)
-        w, keep = self.scenario.spec.world, self.radius + self.cfg.margin
-        bounds = (np.array([w.xmin + keep, w.ymin + keep]), np.array([w.xmax - keep, w.ymax - keep]))
         if self.cfg.target_gap > 0:
-            inside = bounds if self.cfg.in_world and self.cfg.separate_in_world else None
+            inside = self.bounds if self.cfg.in_world and self.cfg.separate_in_world else None
             targets = separated(targets, 2 * self.radius + self.cfg.target_gap, bounds=inside)
         if self.cfg.in_sight:
             targets = self._in_sight(pos, targets, dt)
         if self.cfg.in_world:
-            targets = np.clip(targets, *bounds)
+            targets = np.clip(targets, *self.bounds)
         return targets
 
     def _in_sight(self, pos: np.ndarray, targets: np.ndarray, dt: float) -> np.ndarray:
@@ -376,14 +376,13 @@ class StafPlan:
             self.anchor[j] = min(max(self.anchor[j], s), cap)
 
     def _cut_at_end(self, j: int) -> float:
-        """Mean length (m) by which the path's end cuts short the column slots of subteam j (`_column` places them at
+        """Mean length (m) by which the path's end cuts short the column slots of subteam j (`_place` puts places at
         arc lengths past the end on the end point), weighted by how far the subteam is a column: its robots' mean
         progress stays that far behind its anchor however well they keep their slots."""
         weight = self._file_weight(j)
         if weight == 0.0:
             return 0.0
-        arcs = self.anchor[j] + ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
-        return weight * float(np.maximum(arcs - self.frame.length, 0.0).mean())
+        return weight * float(np.maximum(self._column_arcs(j) - self.frame.length, 0.0).mean())
 
     def _short_of_taken(self, j: int) -> float:
         """The furthest subteam j's anchor may go while merging: its front `follow_gap` behind the nearest goal slot
@@ -449,13 +448,13 @@ class StafPlan:
             self.targets[idx] = slots @ np.array([[c, s], [-s, c]]) + point
             weight = self._file_weight(j)
             if weight > 0:
-                self.targets[idx] = (1 - weight) * self.targets[idx] + weight * self._column(j)
+                column = self.frame.at(self._column_arcs(j))[0]  # places past the path's end fall on it
+                self.targets[idx] = (1 - weight) * self.targets[idx] + weight * column
 
-    def _column(self, j: int) -> np.ndarray:
-        """Subteam j as a column along the path centred on its anchor, at the team's spacing, in `ranks[j]`'s order
-        (`column_rank`, then `_follow_order`)."""
-        offsets = ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
-        return self.frame.at(self.anchor[j] + offsets)[0]
+    def _column_arcs(self, j: int) -> np.ndarray:
+        """Arc lengths of subteam j's column places: centred on its anchor, at the team's spacing, in `ranks[j]`'s
+        order (`column_rank`, then `_follow_order`)."""
+        return self.anchor[j] + ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
 
     def _follow_order(self, progress: np.ndarray) -> None:
         """Moving subteams that are a column take their robots' order along the path (`plan.reorder`): two robots
