@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from staf_plans import ideal_run, start_and_plan
+from staf_plans import ideal_run, scenario_with, start_and_plan
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.plan_geometry import column_rank, follow_order
 from stafpipe.geometry import obstacle_distance
@@ -166,3 +166,29 @@ def test_a_column_longer_than_the_way_left_reaches_the_paths_end(tmp_path, lead_
     tt, log, _ = ideal_run(sc, nine_three, steps=600, plan_cfg=cfg)
     assert log["events"][0] == "split" and ("regroup" in log["events"]) == lead_past_end
     assert math.isfinite(tt) == lead_past_end
+
+
+_CORRIDOR_NORTH = """
+name: corridor-north
+world: {xmin: -12, ymin: 0, xmax: 0, ymax: 30}
+obstacles:
+  - box: {center: [-2.4, 15], size: [4.8, 6]}
+  - box: {center: [-9.6, 15], size: [4.8, 6]}
+team: {n: 10, formation: wedge, spacing: 1.0, start: [-6.0, 4.0], goal: [-6.0, 26.0], heading_deg: 90}
+robot: {radius: 0.2, max_speed: 1.0, max_accel: 2.0, drive: holonomic}
+time_limit: 120
+"""
+"""The Table-1 corridor with a wedge, turned a quarter turn anticlockwise: the team heads north, not east."""
+
+
+@pytest.mark.parametrize("cut_frame", ["world", "travel"])
+def test_the_cut_gives_the_same_subteams_whichever_way_the_map_points(tmp_path, cut_frame) -> None:
+    """`plan.cut_frame`: the deep graph cut's features are world-frame vectors, so in the world's axes the shipped
+    cut divides the wedge heading north otherwise than the same wedge heading east; in the team's travel frame the
+    two get the same subteams (robot i is slot i in both)."""
+    divide, cfg = divider(), PlanConfig(cut_frame=cut_frame)
+    first = []
+    for sc in (scenario_with("corridor", "wedge"), _map(tmp_path, _CORRIDOR_NORTH)):
+        _, log, _ = ideal_run(sc, divide, steps=50, plan_cfg=cfg)
+        first.append(next(labels for labels in log["labels"] if labels.max() > 0))
+    assert np.array_equal(first[0], first[1]) == (cut_frame == "travel")

@@ -37,6 +37,7 @@ PLAN_SAFEGUARDS = (
     "in_world",
     "separate_in_world",
     "lead_past_end",
+    "cut_frame",
 )
 """Plan settings that only keep targets from crossing, crowding, running into robots already home or leaving the world
 (docs/staf.md): a policy trained without them runs with them, so they are not compared with its training record."""

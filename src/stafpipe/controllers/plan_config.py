@@ -50,6 +50,11 @@ class PlanConfig:
     balance: bool = False
     """True: subteam sizes within one of each other (`highlevel.partition.balance_sizes`; the line's 3-1-3-3 becomes
     3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
+    cut_frame: str = "travel"
+    """The frame the deep graph cut sees the team in: `travel` (turned so that the team heads along +x,
+    `highlevel.infer.travel_frame`: the same subteams whichever way the map points) or `world` (the world's axes, as
+    the shipped policy was trained; a ten-robot wedge heading north was cut 6-4 where heading east it is cut 7-3).
+    docs/decisions.md."""
     high_checkpoint: str = ""
     """The deep graph cut (`stafpipe train-high`); empty: the shipped one."""
     home: str = "departure"
@@ -119,6 +124,7 @@ class PlanConfig:
         for name in (*lengths, "sight_wait"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
+        require(self.cut_frame in ("travel", "world"), f"{key}.cut_frame", "must be travel or world", self.cut_frame)
         require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)
         require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
         require(self.home_approach >= 0, f"{key}.home_approach", "must be >= 0", self.home_approach)

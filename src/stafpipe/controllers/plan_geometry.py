@@ -127,3 +127,14 @@ def follow_order(rank: np.ndarray, progress: np.ndarray, margin: float, until: f
     out = np.empty_like(rank)
     out[by_place] = np.arange(len(rank))
     return out
+
+
+def travel_frame(pos: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and goals (n, 2) turned about the origin so that the team heads along +x, from its centre to its
+    goal centre (the deep graph cut's `heading` feature). The cut's node features are world-frame vectors (STAF
+    Sec. 3: p_i, g_i, q_i) and the network, trained on every heading, is not exactly equivariant; in this frame its
+    subteams do not depend on which way the map points (docs/decisions.md, "The cut in the team's travel frame")."""
+    d = goal.mean(axis=0) - pos.mean(axis=0)
+    a = np.arctan2(d[1], d[0])
+    turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])  # row vectors times R(-a)^T
+    return pos @ turn, goal @ turn

@@ -202,7 +202,8 @@ class StafPlan:
         self.split_done = True
         if self.m_wanted <= 1:
             return
-        labels = np.asarray(self.divide(pos, self.goal, self.m_wanted), dtype=int)
+        cut_pos, cut_goal = geo.travel_frame(pos, self.goal) if self.cfg.cut_frame == "travel" else (pos, self.goal)
+        labels = np.asarray(self.divide(cut_pos, cut_goal, self.m_wanted), dtype=int)
         if self.cfg.balance:
             from stafpipe.highlevel.partition import balance_sizes
 
