@@ -5,6 +5,7 @@ still reaches the path's end (`plan.lead_past_end`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -192,3 +193,17 @@ def test_the_cut_gives_the_same_subteams_whichever_way_the_map_points(tmp_path, 
         _, log, _ = ideal_run(sc, divide, steps=50, plan_cfg=cfg)
         first.append(next(labels for labels in log["labels"] if labels.max() > 0))
     assert np.array_equal(first[0], first[1]) == (cut_frame == "travel")
+
+
+@pytest.mark.parametrize("start_slots", [False, True])
+def test_a_team_facing_away_from_its_path_turns_its_formation_without_crossing(start_slots) -> None:
+    """`plan.start_slots`: a wedge facing west with its goal to the east. Robot i kept slot i of the formation laid
+    along the path (facing east), so robots were sent through each other (5 % SR, 99 contacts per episode on the
+    doorway); taking the nearest slots (min-sum-of-squares, as CAPT), robots moving to their first targets all the
+    same fraction of the way stay more than two radii apart."""
+    sc = scenario_with("doorway", "wedge")
+    sc = build_scenario(dataclasses.replace(sc.spec, team=dataclasses.replace(sc.spec.team, heading_deg=180.0)))
+    pos, plan = start_and_plan(sc, lambda p, g, m: np.zeros(len(p), int), PlanConfig(start_slots=start_slots))
+    way = np.linspace(0.0, 1.0, 101)[:, None, None] * (plan.step(pos, 0.1) - pos) + pos
+    closest = (np.linalg.norm(way[:, :, None] - way[:, None], axis=-1) + 9 * np.eye(len(pos))).min()
+    assert (closest > 2 * sc.spec.robot.radius) == start_slots, closest

@@ -101,9 +101,10 @@ def rotation(heading_rad: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def place(slots: np.ndarray, centre: np.ndarray | tuple[float, float], heading_rad: float) -> np.ndarray:
-    """World positions of formation-frame `slots` rotated to `heading_rad` and moved to `centre`."""
-    return slots @ rotation(heading_rad).T + np.asarray(centre, dtype=float)
+def place(slots: np.ndarray, centre: np.ndarray | tuple[float, float], heading_rad: float | np.ndarray) -> np.ndarray:
+    """World positions of formation-frame `slots` rotated to `heading_rad` (a number or a 0-d array) and moved to
+    `centre`."""
+    return slots @ rotation(float(heading_rad)).T + np.asarray(centre, dtype=float)
 
 
 def assign_slots(positions: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -109,6 +109,11 @@ class PlanConfig:
     off its column's slots (`StafPlan._cut_at_end`): a column longer than the way left to the goal no longer holds
     its anchor short of the end, where a robot still in the passage waited for ever (a 12-robot wedge through a door
     5 m before its goal; docs/staf.md); false: `max_lead` alone, as trained."""
+    start_slots: bool = True
+    """At the first step the robots take the team's slots, laid along the path, nearest to where they stand
+    (Hungarian; robots are alike): a team whose formation faces another way than its path (`team.heading_deg` 180,
+    or 0 on a map heading north) turns its formation on the way instead of every robot crossing the team to slot i;
+    false: robot i keeps slot i, as trained (docs/staf.md)."""
     unblock: bool = True
     """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
     ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""

@@ -29,7 +29,7 @@ from stafpipe.controllers.plan_geometry import (
     separated,
     unit_slots,
 )
-from stafpipe.formations import assign_slots
+from stafpipe.formations import assign_slots, place
 from stafpipe.geometry import PathFrame, obstacle_distance
 
 
@@ -174,6 +174,8 @@ class StafPlan:
         progress = self.frame.progress(pos)
         if self.anchor[0] < 0:
             self.anchor[0] = progress.mean()
+            if self.cfg.start_slots:
+                self._take_start_slots(pos)
         if not self.split_done and progress.mean() >= self.narrow_start - self.cfg.split_distance:
             self._split(pos, progress)
         passed = progress > self.narrow_end + self.radius
@@ -197,6 +199,12 @@ class StafPlan:
             self.labels[passed] = 0
             return self._home(dt)
         return self.targets
+
+    def _take_start_slots(self, pos: np.ndarray) -> None:
+        """`plan.start_slots`: robots take the team's slots laid along the path nearest to them (Hungarian)."""
+        perm = assign_slots(pos, place(self.full_slots, *self.frame.at(self.anchor[0])))
+        self.slots[0] = self.full_slots[perm] / self.spacing
+        self.ranks[0] = column_rank(self.slots[0])
 
     def _split(self, pos: np.ndarray, progress: np.ndarray) -> None:
         self.split_done = True
@@ -228,9 +236,7 @@ class StafPlan:
                 if not anchors
                 else anchors[-1] - (last_depth + depth) / 2 - self.cfg.follow_gap
             )
-            point, heading = self.frame.at(a)
-            c, s = math.cos(heading), math.sin(heading)
-            perm = assign_slots(pos[idx], unit * self.spacing @ np.array([[c, s], [-s, c]]) + point)
+            perm = assign_slots(pos[idx], place(unit * self.spacing, *self.frame.at(a)))
             self.order.append(idx)
             self.slots.append(unit[perm])  # robot idx[k] takes slot perm[k]
             self.ranks.append(column_rank(self.slots[-1]))
@@ -262,13 +268,11 @@ class StafPlan:
         idx = self.order[j]
         centre = pos[idx].mean(axis=0)
         _, heading = self.frame.at(float(self.frame.progress(centre[None])[0]))
-        c, s = math.cos(heading), math.sin(heading)
-        slots = self.slots[j] * self.spacing @ np.array([[c, s], [-s, c]])
+        slots = place(self.slots[j] * self.spacing, (0.0, 0.0), heading)
         return slots - slots.mean(axis=0) + centre
 
     def _start_regroup(self, pos: np.ndarray) -> None:
-        """Every robot past the last narrow stretch (or the front subteam at the path's end: the goal area itself is
-        tight): the original formation's goal slots are reassigned to the robots (Hungarian)."""
+        """Every robot past the last narrow stretch, or the front subteam at the path's end: goal slots reassigned."""
         self.merging = True
         if len(self.order) > 1:
             self.goal = self.goal_slots[assign_slots(pos, self.goal_slots)]
@@ -443,10 +447,7 @@ class StafPlan:
                 self.targets[idx] = self.hold[j]
                 continue
             spacing = self._spacing(j, self.anchor[j]) if self.split_done else self.spacing
-            point, heading = self.frame.at(self.anchor[j])
-            c, s = math.cos(heading), math.sin(heading)
-            slots = self.slots[j] * spacing
-            self.targets[idx] = slots @ np.array([[c, s], [-s, c]]) + point
+            self.targets[idx] = place(self.slots[j] * spacing, *self.frame.at(self.anchor[j]))
             weight = self._file_weight(j)
             if weight > 0:
                 column = self.frame.at(self._column_arcs(j))[0]  # places past the path's end fall on it
