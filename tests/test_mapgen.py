@@ -8,9 +8,9 @@ import pytest
 
 from conftest import job_dirs
 from stafpipe.formations import place
-from stafpipe.geometry import Geometry, obstacle_distance
+from stafpipe.geometry import Geometry, obstacle_distance, path_length
 from stafpipe.launch import launch
-from stafpipe.mapgen import FAMILIES, MapsConfig, draw_map, generate_maps
+from stafpipe.mapgen import FAMILIES, MapsConfig, draw_map, generate_maps, turned
 from stafpipe.scenario import build_scenario, load_scenario_file
 
 
@@ -65,3 +65,35 @@ def test_generate_maps_stage_writes_loadable_scenarios_and_refuses_bad_config(wo
     assert launch("generate-maps", ["maps.width=[0.2,1.0]"]) == 2
     assert launch("generate-maps", ["maps.families=[maze]"]) == 2
     assert len(job_dirs(workdir)) == 1
+
+
+@pytest.mark.slow  # 2-5 s on 2 cores
+def test_an_s_bend_whose_pieces_fill_the_stretch_is_drawn() -> None:
+    """Seed 11, map 4: the S-bend's three pieces fill the obstacles' stretch exactly, and its start drawn from
+    [x0, x1 - 3 seg] had high below low by rounding: the draw raised (high - low < 0) and the map set failed."""
+    spec = draw_map(np.random.default_rng([11, 4]), MapsConfig(), "t")
+    assert spec.name == "t-s_bend"
+
+
+@pytest.mark.slow  # about 5 s on 2 cores
+def test_turned_maps_travel_other_ways_with_the_same_geometry() -> None:
+    """`maps.turns`: a map turned by quarter turns keeps its passage width and shortest way (the world, obstacles,
+    team and heading turn together), and with turns on the teams travel more than one way."""
+    spec = draw_map(np.random.default_rng([4, 0]), MapsConfig(families=["doorway"]), "t")
+
+    def measured(sc):
+        g, t, r = Geometry(sc), sc.spec.team, sc.spec.robot.radius
+        way = g.shortest_path(tuple(t.start), tuple(t.goal), r)
+        return g.passage_width(tuple(t.start), tuple(t.goal)), path_length(way)
+
+    width, length = measured(build_scenario(spec))
+    quarter = np.array([[0.0, -1.0], [1.0, 0.0]])
+    for quarters in (1, 2, 3):
+        sc = build_scenario(turned(spec, quarters))
+        t = sc.spec.team
+        expected = np.linalg.matrix_power(quarter, quarters) @ np.subtract(spec.team.goal, spec.team.start)
+        assert np.allclose(np.subtract(t.goal, t.start), expected, atol=2e-3) and t.heading_deg == 90.0 * quarters
+        w, n = measured(sc)
+        assert abs(w - width) < 0.05 and abs(n - length) < 0.1, (quarters, w, width, n, length)
+    headings = {m.team.heading_deg for m in generate_maps(MapsConfig(count=6, turns=True), seed=4)}
+    assert len(headings) > 1 and headings <= {0.0, 90.0, 180.0, 270.0}

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,6 +47,10 @@ class MapsConfig:
     """Robot drives, drawn uniformly."""
     spacing: float = 1.0
     """The team's nominal spacing (m), as in STAF's corridor."""
+    turns: bool = False
+    """True: each map is turned by a quarter turn drawn from {0, 90, 180, 270} degrees (world, obstacles, team and its
+    heading together), so the team travels east, north, west or south; false: every team travels east (+x), as the
+    shipped policy's training maps (docs/scenarios.md)."""
 
     def check(self, key: str = "maps") -> None:
         require(self.count >= 1, f"{key}.count", "must be >= 1", self.count)
@@ -126,7 +130,7 @@ def _corridor(rng, cfg: MapsConfig, lay: _Layout, long: bool = False) -> list[di
     w = rng.uniform(*cfg.width)
     lo, hi = cfg.length if not long else (max(cfg.length[0], 6.0), max(cfg.length[1], 6.0))
     length = min(rng.uniform(lo, hi), lay.x1 - lay.x0)
-    x0 = rng.uniform(lay.x0, lay.x1 - length)
+    x0 = rng.uniform(lay.x0, max(lay.x0, lay.x1 - length))  # max: the length may fill the stretch to the last ulp
     y_lo, y_hi = _lane(rng, lay, w, 1.0)
     return _walls_around(x0, x0 + length, y_lo, y_hi, lay.height)
 
@@ -146,7 +150,7 @@ def _bend(rng, cfg: MapsConfig, lay: _Layout, s_shape: bool) -> list[dict]:
     shift = rng.uniform(1.0, 3.0) * rng.choice([-1.0, 1.0])
     pieces = 3 if s_shape else 2
     seg = min(rng.uniform(1.5, 4.0), (lay.x1 - lay.x0) / pieces)
-    x = rng.uniform(lay.x0, lay.x1 - pieces * seg)
+    x = rng.uniform(lay.x0, max(lay.x0, lay.x1 - pieces * seg))  # max: seg may fill the stretch to the last ulp
     centres = [lay.centre, lay.centre + shift, lay.centre][:pieces]
     out: list[dict] = []
     for k, c in enumerate(centres):
@@ -268,8 +272,39 @@ def draw_map(rng: np.random.Generator, cfg: MapsConfig, name: str) -> ScenarioCo
             continue
         if len(route) >= 2:
             spec.name = f"{name}-{family}"
-            return spec
+            return turned(spec, int(rng.integers(4))) if cfg.turns else spec
     raise RuntimeError(f"maps: no passable map in 50 draws (families {cfg.families}, width {cfg.width})")
+
+
+def turned(spec: ScenarioConfig, quarters: int) -> ScenarioConfig:
+    """`spec` turned anticlockwise by `quarters` quarter turns about the origin and moved back so that its world
+    starts at (0, 0): a point (x, y) goes to (-y, x) per quarter turn; boxes and the team's heading turn with it."""
+    w = spec.world
+    corners = np.array([[w.xmin, w.ymin], [w.xmax, w.ymax]])
+    turn = np.linalg.matrix_power(np.array([[0.0, -1.0], [1.0, 0.0]]), quarters % 4)
+    low = (corners @ turn.T).min(axis=0)
+
+    def point(p) -> list[float]:
+        q = np.asarray(p, float) @ turn.T - low
+        return [_r(q[0], 3), _r(q[1], 3)]
+
+    obstacles = []
+    for ob in spec.obstacles:
+        if "box" in ob:
+            box = dict(ob["box"], center=point(ob["box"]["center"]))
+            box["angle_deg"] = _r(float(box.get("angle_deg", 0.0)) + 90.0 * quarters, 1)
+            obstacles.append({"box": box})
+        else:  # the generator's other obstacles are discs
+            obstacles.append({"circle": dict(ob["circle"], center=point(ob["circle"]["center"]))})
+    size = np.abs(turn @ (corners[1] - corners[0]))
+    team = replace(
+        spec.team,
+        start=point(spec.team.start),
+        goal=point(spec.team.goal),
+        heading_deg=_r(spec.team.heading_deg + 90.0 * quarters, 1),
+    )
+    world = WorldBounds(0.0, 0.0, _r(size[0], 3), _r(size[1], 3))
+    return replace(spec, world=world, obstacles=obstacles, team=team)
 
 
 def generate_maps(cfg: MapsConfig, seed: int, prefix: str = "gen") -> list[ScenarioConfig]:
