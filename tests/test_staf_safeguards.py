@@ -60,9 +60,10 @@ def test_robots_held_at_the_path_end_start_home(tmp_path, end_home) -> None:
 def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot(wait) -> None:
     """`plan.in_sight`: a robot beside the corridor's mouth whose target lies inside the corridor (the wall between
     them) aims at the path instead once the target has been out of sight for `plan.sight_wait` seconds, no more than
-    1 m ahead of its own place on it; a robot that sees its target keeps it."""
+    1 m ahead of its own place on it; a robot that sees its target keeps it. (Without `hold_short`, tested below, the
+    target stays where it is while the robot waits.)"""
     sc = load_named_scenario("corridor")
-    team, plan = start_and_plan(sc, divider(), PlanConfig(sight_wait=wait))
+    team, plan = start_and_plan(sc, divider(), PlanConfig(sight_wait=wait, hold_short=0.0))
     (cx, cy), (w, h) = sc.spec.obstacles[1]["box"]["center"], sc.spec.obstacles[1]["box"]["size"]  # the upper wall
     outside = np.array([cx - w / 2 - 0.5, cy - h / 2 + 1.0])  # before the wall's face, above the corridor's mouth
     inside, _ = plan.frame.at(plan.frame.progress(outside[None])[0] + 3.0)
@@ -207,3 +208,22 @@ def test_a_team_facing_away_from_its_path_turns_its_formation_without_crossing(s
     way = np.linspace(0.0, 1.0, 101)[:, None, None] * (plan.step(pos, 0.1) - pos) + pos
     closest = (np.linalg.norm(way[:, :, None] - way[:, None], axis=-1) + 9 * np.eye(len(pos))).min()
     assert (closest > 2 * sc.spec.robot.radius) == start_slots, closest
+
+
+@pytest.mark.parametrize("hold_short", [0.0, 0.15])
+def test_a_target_behind_a_wall_is_held_short_of_it_while_the_robot_waits(hold_short) -> None:
+    """`plan.hold_short`: a robot 1.5 m before the corridor's wall whose target lies inside the wall. Before the
+    `sight_wait` is over, its target is held on its way, at least a radius and `hold_short` from the wall and within
+    one checked point (0.1 m) of that; without it the target stays in the wall and the robot presses against it."""
+    sc = load_named_scenario("corridor")
+    pos, plan = start_and_plan(sc, lambda p, g, m: np.zeros(len(p), int), PlanConfig(hold_short=hold_short))
+    pos[0] = (10.5, 2.0)  # the wall's face is at x = 12 below y = 4.8
+    targets = pos.copy()
+    targets[0] = (13.0, 2.0)
+    out = plan._in_sight(pos, targets, 0.1)
+    assert np.array_equal(out[1:], targets[1:])
+    if hold_short == 0:
+        assert np.array_equal(out[0], targets[0])
+    else:
+        gap = obstacle_distance(out[:1], sc)[0] - sc.spec.robot.radius
+        assert out[0, 1] == 2.0 and hold_short - 1e-6 <= gap <= hold_short + 0.1 + 1e-6, out[0]

@@ -109,6 +109,12 @@ class PlanConfig:
     off its column's slots (`StafPlan._cut_at_end`): a column longer than the way left to the goal no longer holds
     its anchor short of the end, where a robot still in the passage waited for ever (a 12-robot wedge through a door
     5 m before its goal; docs/staf.md); false: `max_lead` alone, as trained."""
+    hold_short: float = 0.15
+    """> 0: while a robot waits for a target out of sight (`in_sight`, `sight_wait`), its target is held on its
+    straight way where that way still keeps this gap (m) from the obstacle (`plan_geometry.short_of`): the network
+    drives to its target and crept into the wall's face beside a passage's mouth, then caught the corner as it turned
+    for the path (gen31_0002). 0.15: the teacher's stop gap (`imitation.stop_gap`), chosen against 0.05 on 40
+    validation maps; 0: the target stays behind the wall, as trained (docs/staf.md)."""
     start_slots: bool = True
     """At the first step the robots take the team's slots, laid along the path, nearest to where they stand
     (Hungarian; robots are alike): a team whose formation faces another way than its path (`team.heading_deg` 180,
@@ -126,7 +132,7 @@ class PlanConfig:
         )
         require(self.adapt in ("geometric", "nominal"), f"{key}.adapt", "must be geometric or nominal", self.adapt)
         lengths = ("safe_gap", "min_gap", "margin", "max_lead", "follow_gap", "split_distance", "file_ramp")
-        for name in (*lengths, "sight_wait"):
+        for name in (*lengths, "sight_wait", "hold_short"):
             require(getattr(self, name) >= 0, f"{key}.{name}", "must be >= 0", getattr(self, name))
         require(self.speed > 0, f"{key}.speed", "must be > 0", self.speed)
         require(self.cut_frame in ("travel", "world"), f"{key}.cut_frame", "must be travel or world", self.cut_frame)

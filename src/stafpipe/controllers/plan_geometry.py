@@ -138,3 +138,24 @@ def travel_frame(pos: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndar
     a = np.arctan2(d[1], d[0])
     turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])  # row vectors times R(-a)^T
     return pos @ turn, goal @ turn
+
+
+def short_of(samples: np.ndarray, clear: np.ndarray, gap: float) -> np.ndarray:
+    """(m, 2): along each row of points `samples` (m, k, 2) from a robot to its target, the last point before the first
+    whose clearance `clear` (m, k) is below `gap` (the robot's own place if that is the first point)."""
+    near = clear < gap
+    first = np.where(near.any(axis=1), near.argmax(axis=1), samples.shape[1])
+    return samples[np.arange(len(samples)), np.maximum(first - 1, 0)]
+
+
+def ramp_around(tight: np.ndarray, ds: float, ramp: float) -> np.ndarray:
+    """(samples,): 1 at the path samples (`ds` apart) where `tight` holds, falling linearly to 0 over `ramp` metres on
+    either side; 0 everywhere if it holds nowhere."""
+    where = np.flatnonzero(tight)
+    if not len(where):
+        return np.zeros(len(tight))
+    k = np.arange(len(tight))
+    after = np.clip(np.searchsorted(where, k), 0, len(where) - 1)  # nearest tight sample at or after k
+    before = np.clip(after - 1, 0, len(where) - 1)
+    gap = np.minimum(np.abs(k - where[after]), np.abs(k - where[before])) * ds
+    return np.clip(1.0 - gap / max(ramp, 1e-9), 0.0, 1.0)

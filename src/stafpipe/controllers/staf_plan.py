@@ -87,14 +87,7 @@ class StafPlan:
         if not self.cfg.single_file or len(unit) < 2:
             return np.zeros(len(self.clear))
         smallest = extent(unit * (2 * self.radius + self.cfg.min_gap), self.radius)[1]
-        tight = np.flatnonzero(2 * (self.clear - self.cfg.margin) < smallest)
-        if not len(tight):
-            return np.zeros(len(self.clear))
-        k = np.arange(len(self.clear))
-        after = np.clip(np.searchsorted(tight, k), 0, len(tight) - 1)  # nearest tight sample at or after k
-        before = np.clip(after - 1, 0, len(tight) - 1)
-        gap = np.minimum(np.abs(k - tight[after]), np.abs(k - tight[before])) * self.ds
-        return np.clip(1.0 - gap / max(self.cfg.file_ramp, 1e-9), 0.0, 1.0)
+        return geo.ramp_around(2 * (self.clear - self.cfg.margin) < smallest, self.ds, self.cfg.file_ramp)
 
     def _m_wanted(self, eta: float) -> int:
         from stafpipe.highlevel.partition import choose_m
@@ -150,21 +143,25 @@ class StafPlan:
         bollard sees its target again sooner, and keeps it."""
         way = targets - pos
         length = np.linalg.norm(way, axis=1)
-        # a way inside the free disc around the robot is in sight: only the others are checked point by point (two
-        # grid cells of margin: the grid's nearest-cell error at both ends, so the result is the same as checking all)
+        # a way inside the robot's free disc is in sight; the others are checked point by point (two grid cells of
+        # margin: the grid's nearest-cell error at both ends, so the result is the same as checking all)
         blocked = self.geometry.clearance(pos) < length + SIGHT_STEP / 2 + 2 * self.geometry.resolution
+        out = targets.copy()
         if blocked.any():
             k = int(min(200, max(2, length[blocked].max() / SIGHT_STEP + 1)))
             samples = pos[blocked, None] + np.linspace(0.0, 1.0, k)[None, :, None] * way[blocked, None]
-            blocked[blocked] = (self.geometry.clearance(samples) < SIGHT_STEP / 2).any(axis=1)
+            clear = self.geometry.clearance(samples)
+            rows = np.flatnonzero(blocked)
+            blocked[rows] = (clear < SIGHT_STEP / 2).any(axis=1)
+            if self.cfg.hold_short > 0:  # while it waits, a target behind an obstacle is held short of it
+                stop = geo.short_of(samples, clear, self.radius + self.cfg.hold_short)
+                out[rows[blocked[rows]]] = stop[blocked[rows]]
         self.unseen = np.where(blocked, self.unseen + dt, 0.0)
         lost = self.unseen >= self.cfg.sight_wait - 1e-9
-        if not lost.any():
-            return targets
-        own = self.frame.progress(pos[lost])
-        s = np.clip(self.frame.progress(targets[lost]), own - SIGHT_REACH, own + SIGHT_REACH)
-        out = targets.copy()
-        out[lost] = self.frame.at(s)[0]
+        if lost.any():
+            own = self.frame.progress(pos[lost])
+            s = np.clip(self.frame.progress(targets[lost]), own - SIGHT_REACH, own + SIGHT_REACH)
+            out[lost] = self.frame.at(s)[0]
         return out
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
