@@ -52,7 +52,7 @@ class PlanConfig:
     3-2-3-2); false: the cut's sizes as they are, as the shipped policy was trained (docs/staf.md: no CFI gain)."""
     cut_frame: str = "travel"
     """The frame the deep graph cut sees the team in: `travel` (turned so that the team heads along +x,
-    `highlevel.infer.travel_frame`: the same subteams whichever way the map points) or `world` (the world's axes, as
+    `plan_geometry.travel_frame`: the same subteams whichever way the map points) or `world` (the world's axes, as
     the shipped policy was trained; a ten-robot wedge heading north was cut 6-4 where heading east it is cut 7-3).
     docs/decisions.md."""
     high_checkpoint: str = ""

@@ -7,7 +7,7 @@ from itertools import permutations
 
 import numpy as np
 
-from stafpipe.formations import formation_slots
+from stafpipe.formations import formation_slots, place
 from stafpipe.geometry import obstacle_distance
 
 
@@ -135,9 +135,8 @@ def travel_frame(pos: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndar
     Sec. 3: p_i, g_i, q_i) and the network, trained on every heading, is not exactly equivariant; in this frame its
     subteams do not depend on which way the map points (docs/decisions.md, "The cut in the team's travel frame")."""
     d = goal.mean(axis=0) - pos.mean(axis=0)
-    a = np.arctan2(d[1], d[0])
-    turn = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])  # row vectors times R(-a)^T
-    return pos @ turn, goal @ turn
+    back = -float(np.arctan2(d[1], d[0]))
+    return place(pos, (0.0, 0.0), back), place(goal, (0.0, 0.0), back)
 
 
 def short_of(samples: np.ndarray, clear: np.ndarray, gap: float) -> np.ndarray:
