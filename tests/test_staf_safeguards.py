@@ -26,6 +26,11 @@ def _map(tmp_path, text: str):
     return build_scenario(load_scenario_file(tmp_path / "map.yaml"))
 
 
+def _no_split(pos, goal, m):
+    """A partitioner that keeps the team whole (for tests of what the plan does before any split)."""
+    return np.zeros(len(pos), dtype=int)
+
+
 _EXIT_TURN = """
 name: exit-turn
 world: {xmin: 0.0, ymin: 0.0, xmax: 18.26, ymax: 11.22}
@@ -204,7 +209,7 @@ def test_a_team_facing_away_from_its_path_turns_its_formation_without_crossing(s
     same fraction of the way stay more than two radii apart."""
     sc = scenario_with("doorway", "wedge")
     sc = build_scenario(dataclasses.replace(sc.spec, team=dataclasses.replace(sc.spec.team, heading_deg=180.0)))
-    pos, plan = start_and_plan(sc, lambda p, g, m: np.zeros(len(p), int), PlanConfig(start_slots=start_slots))
+    pos, plan = start_and_plan(sc, _no_split, PlanConfig(start_slots=start_slots))
     way = np.linspace(0.0, 1.0, 101)[:, None, None] * (plan.step(pos, 0.1) - pos) + pos
     closest = (np.linalg.norm(way[:, :, None] - way[:, None], axis=-1) + 9 * np.eye(len(pos))).min()
     assert (closest > 2 * sc.spec.robot.radius) == start_slots, closest
@@ -216,7 +221,7 @@ def test_a_target_behind_a_wall_is_held_short_of_it_while_the_robot_waits(hold_s
     `sight_wait` is over, its target is held on its way, at least a radius and `hold_short` from the wall and within
     one checked point (0.1 m) of that; without it the target stays in the wall and the robot presses against it."""
     sc = load_named_scenario("corridor")
-    pos, plan = start_and_plan(sc, lambda p, g, m: np.zeros(len(p), int), PlanConfig(hold_short=hold_short))
+    pos, plan = start_and_plan(sc, _no_split, PlanConfig(hold_short=hold_short))
     pos[0] = (10.5, 2.0)  # the wall's face is at x = 12 below y = 4.8
     targets = pos.copy()
     targets[0] = (13.0, 2.0)

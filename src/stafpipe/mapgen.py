@@ -281,8 +281,8 @@ def turned(spec: ScenarioConfig, quarters: int) -> ScenarioConfig:
     starts at (0, 0): a point (x, y) goes to (-y, x) per quarter turn; boxes and the team's heading turn with it."""
     w = spec.world
     corners = np.array([[w.xmin, w.ymin], [w.xmax, w.ymax]])
-    turn = np.linalg.matrix_power(np.array([[0.0, -1.0], [1.0, 0.0]]), quarters % 4)
-    low = (corners @ turn.T).min(axis=0)
+    turn = np.linalg.matrix_power(np.array([[0.0, -1.0], [1.0, 0.0]]), quarters % 4)  # exact, unlike cos and sin
+    low, high = (corners @ turn.T).min(axis=0), (corners @ turn.T).max(axis=0)
 
     def point(p) -> list[float]:
         q = np.asarray(p, float) @ turn.T - low
@@ -296,14 +296,13 @@ def turned(spec: ScenarioConfig, quarters: int) -> ScenarioConfig:
             obstacles.append({"box": box})
         else:  # the generator's other obstacles are discs
             obstacles.append({"circle": dict(ob["circle"], center=point(ob["circle"]["center"]))})
-    size = np.abs(turn @ (corners[1] - corners[0]))
     team = replace(
         spec.team,
         start=point(spec.team.start),
         goal=point(spec.team.goal),
         heading_deg=_r(spec.team.heading_deg + 90.0 * quarters, 1),
     )
-    world = WorldBounds(0.0, 0.0, _r(size[0], 3), _r(size[1], 3))
+    world = WorldBounds(0.0, 0.0, _r(high[0] - low[0], 3), _r(high[1] - low[1], 3))
     return replace(spec, world=world, obstacles=obstacles, team=team)
 
 

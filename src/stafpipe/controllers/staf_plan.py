@@ -152,10 +152,10 @@ class StafPlan:
             samples = pos[blocked, None] + np.linspace(0.0, 1.0, k)[None, :, None] * way[blocked, None]
             clear = self.geometry.clearance(samples)
             rows = np.flatnonzero(blocked)
-            blocked[rows] = (clear < SIGHT_STEP / 2).any(axis=1)
+            crossed = (clear < SIGHT_STEP / 2).any(axis=1)
+            blocked[rows] = crossed
             if self.cfg.hold_short > 0:  # while it waits, a target behind an obstacle is held short of it
-                stop = geo.short_of(samples, clear, self.radius + self.cfg.hold_short)
-                out[rows[blocked[rows]]] = stop[blocked[rows]]
+                out[rows[crossed]] = geo.short_of(samples[crossed], clear[crossed], self.radius + self.cfg.hold_short)
         self.unseen = np.where(blocked, self.unseen + dt, 0.0)
         lost = self.unseen >= self.cfg.sight_wait - 1e-9
         if lost.any():
