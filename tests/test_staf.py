@@ -182,6 +182,16 @@ def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
     receiver, sender = mask.nonzero(as_tuple=True)
     assert torch.allclose(full.act(own, edge, mask), full(own, edge, mask)[0])
     assert torch.allclose(full.act_sparse(own, receiver, edge[receiver, sender]), full(own, edge, mask)[0], atol=1e-6)
+    # a controller's frozen weights: the pair map computed once gives the very same bits, at 10 robots and 128 wide
+    wide = StafPolicy(PolicyConfig(hidden=128))
+    torch.nn.init.normal_(wide.b_msg)
+    frozen = wide.frozen_act()
+    with torch.inference_mode():
+        for seed in range(5):
+            g = torch.Generator().manual_seed(seed)
+            own, edge = torch.randn(1, 10, STAF_OWN, generator=g), torch.randn(1, 10, 10, STAF_EDGE, generator=g)
+            mask = torch.rand(1, 10, 10, generator=g) < 0.6
+            assert torch.equal(frozen(own, edge, mask), wide.act(own, edge, mask))
 
 
 def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:

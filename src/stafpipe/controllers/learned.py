@@ -74,6 +74,7 @@ class LearnedController(Controller):
             check()
         self.cfg = cfg
         self.policy, self.made_by = load_policy(cfg.checkpoint, cfg.name)
+        self._act = self.policy.frozen_act()  # the checkpoint's weights never change here
         self.teacher = getattr(cfg, "low_level", "learned")  # `learned`, or a hand-made low level (teachers.py)
         differ = checkpoint_mismatch(cfg, self.made_by) if self.teacher == "learned" else {}
         if differ:
@@ -165,7 +166,7 @@ class LearnedController(Controller):
         world acts exactly as it would alone. It costs about 2.5x the network time of one call for 50 worlds
         (docs/decisions.md)."""
         own, edge, mask = (torch.from_numpy(x[w : w + 1]).clone() for x in (f.own, f.edge, f.mask))
-        mean = self.policy.act(own, edge, mask)[0]
+        mean = self._act(own, edge, mask)[0]
         if not self.cfg.deterministic:
             mean = mean + self.policy.log_std.exp() * torch.randn(mean.shape, generator=self.generators[w])
         return mean

@@ -3,6 +3,8 @@ trainer has no method-name branches): a Gaussian policy over velocity commands w
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import nn
 
@@ -19,6 +21,11 @@ class PolicyNet(nn.Module):
 
     def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
+
+    def frozen_act(self) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+        """`act` for weights that will not change again (a controller's loaded checkpoint), with whatever can be
+        computed from the weights alone computed once; the same outputs to the bit. Training never uses it."""
+        return self.act
 
     def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         raise NotImplementedError

@@ -13,6 +13,9 @@ the two.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import torch
 from torch import nn
 
@@ -58,20 +61,26 @@ class StafPolicy(PolicyNet):
             z = z + own[..., STAF_OWN : STAF_OWN + 1] * self.w_drive
         return z
 
-    def _message(self, diff: torch.Tensor) -> torch.Tensor:
+    def _pair_map(self) -> torch.Tensor:
+        """(9, hidden) (W^f W^z)^T, the map `_message` applies to each pair."""
+        return (self.w_f.weight @ self.w_z.weight).T
+
+    def _message(self, diff: torch.Tensor, pair_map: torch.Tensor | None = None) -> torch.Tensor:
         """W^f (z_j - z_i) for each pair, diff = s_j - s_i (.., 9): z_j - z_i = W^z (s_j - s_i) (linear, so the bias
         cancels), and W^f W^z is one 9 x hidden map, so each pair costs a 9-wide product instead of a 9- and a
         hidden-wide one (STAF Sec. 3's phi, the same function to float rounding; the pairs are most of the network's
-        work: docs/staf.md, printed vs used, row 3)."""
-        msg = diff @ (self.w_f.weight @ self.w_z.weight).T
+        work: docs/staf.md, printed vs used, row 3). `pair_map`: that map computed beforehand (`frozen_act`)."""
+        msg = diff @ (self._pair_map() if pair_map is None else pair_map)
         if self.cfg.message == "relu":
             msg = torch.relu(msg + self.b_msg)
         return msg
 
-    def embed(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    def embed(
+        self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor, pair_map: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """f (.., n, hidden): own (.., n, 6, or 7 with `drive_input`), edge (.., n, n, 9), mask (.., n, n)."""
         z = self._own_embedding(own)
-        return self.w_f(z) + (self._message(edge) * mask[..., None].float()).sum(-2)
+        return self.w_f(z) + (self._message(edge, pair_map) * mask[..., None].float()).sum(-2)
 
     def embed_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
         """`embed` on an edge list, for large teams: own (n, 6), receiver (E,) = i of each pair, diff (E, 9) = s_j -
@@ -85,9 +94,17 @@ class StafPolicy(PolicyNet):
             mean = mean + proportional_step(own, self.cfg.prior_gain)
         return mean
 
-    def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    def act(
+        self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor, pair_map: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Action means (.., n, 2) without the critic: execution only."""
-        return self._mean(self.embed(own, edge, mask), own)
+        return self._mean(self.embed(own, edge, mask, pair_map), own)
+
+    def frozen_act(self) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+        """`act` for weights that no longer change (a controller's loaded checkpoint): the pair map is computed once,
+        not at every call; the same product, so the same bits (a test)."""
+        with torch.no_grad():
+            return functools.partial(self.act, pair_map=self._pair_map())
 
     def act_sparse(self, own: torch.Tensor, receiver: torch.Tensor, diff: torch.Tensor) -> torch.Tensor:
         """Action means (n, 2) from an edge list (no critic: execution only)."""
