@@ -1,7 +1,7 @@
 """STAF's plan safeguards: robots held at the path's end start home (`plan.end_home`), a target behind a wall moves
-onto the path (`plan.in_sight`), a column takes its robots' order along the path (`plan.reorder`) and targets stay
-inside the world (`plan.in_world`, `plan.separate_in_world`), and a column longer than the way left to the goal
-still reaches the path's end (`plan.lead_past_end`)."""
+onto the path (`plan.in_sight`) on a way clear of the wall's corner (`plan.sight_clear`), a column takes its robots'
+order along the path (`plan.reorder`) and targets stay inside the world (`plan.in_world`, `plan.separate_in_world`),
+and a column longer than the way left to the goal still reaches the path's end (`plan.lead_past_end`)."""
 
 from __future__ import annotations
 
@@ -66,9 +66,9 @@ def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot(wait) -> 
     """`plan.in_sight`: a robot beside the corridor's mouth whose target lies inside the corridor (the wall between
     them) aims at the path instead once the target has been out of sight for `plan.sight_wait` seconds, no more than
     1 m ahead of its own place on it; a robot that sees its target keeps it. (Without `hold_short`, tested below, the
-    target stays where it is while the robot waits.)"""
+    target stays where it is while the robot waits; `sight_clear`, tested below, may aim nearer.)"""
     sc = load_named_scenario("corridor")
-    team, plan = start_and_plan(sc, divider(), PlanConfig(sight_wait=wait, hold_short=0.0))
+    team, plan = start_and_plan(sc, divider(), PlanConfig(sight_wait=wait, hold_short=0.0, sight_clear=False))
     (cx, cy), (w, h) = sc.spec.obstacles[1]["box"]["center"], sc.spec.obstacles[1]["box"]["size"]  # the upper wall
     outside = np.array([cx - w / 2 - 0.5, cy - h / 2 + 1.0])  # before the wall's face, above the corridor's mouth
     inside, _ = plan.frame.at(plan.frame.progress(outside[None])[0] + 3.0)
@@ -232,3 +232,27 @@ def test_a_target_behind_a_wall_is_held_short_of_it_while_the_robot_waits(hold_s
     else:
         gap = obstacle_distance(out[:1], sc)[0] - sc.spec.robot.radius
         assert out[0, 1] == 2.0 and hold_short - 1e-6 <= gap <= hold_short + 0.1 + 1e-6, out[0]
+
+
+@pytest.mark.parametrize("sight_clear", [False, True])
+def test_a_robot_that_lost_sight_of_its_target_aims_where_its_way_clears_the_corner(sight_clear) -> None:
+    """`plan.sight_clear`: a robot 0.5 m before the corridor's lower wall, below its corner, whose target lies in the
+    wall. Once the target has been out of sight for `sight_wait`, the robot aims at the path: 1 m ahead of its own
+    place, on a way that would take its body across the wall's corner; with sight_clear at the furthest point of the
+    path up to there whose way keeps a radius and `hold_short` from the walls (to the grid's resolution)."""
+    sc = load_named_scenario("corridor")  # the corridor: x 12..18, y 4.8..7.2, the path along y = 6
+    team, plan = start_and_plan(sc, _no_split, PlanConfig(sight_clear=sight_clear))
+    pos, target = team.copy(), team.copy()  # the rest of the team stands on its targets
+    pos[0], target[0] = (11.5, 4.2), (12.8, 4.5)
+    for _ in range(round(plan.cfg.sight_wait / 0.1)):
+        out = plan._in_sight(pos, target, 0.1)
+    assert out[1:] == pytest.approx(target[1:])
+    own = plan.frame.progress(pos[:1])[0]
+    ahead = plan.frame.progress(out[:1])[0] - own
+    way = pos[0] + np.linspace(0.0, 1.0, 200)[:, None] * (out[0] - pos[0])
+    closest = obstacle_distance(way, sc).min() - sc.spec.robot.radius
+    assert plan.frame.lateral(out[:1])[0] == pytest.approx(0.0, abs=1e-6)  # on the path
+    if not sight_clear:
+        assert ahead == pytest.approx(1.0) and closest < 0.0  # the body would cross the corner
+    else:
+        assert 0.0 <= ahead < 1.0 and closest >= plan.cfg.hold_short - plan.geometry.resolution, (ahead, closest)

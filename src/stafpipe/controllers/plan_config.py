@@ -115,6 +115,11 @@ class PlanConfig:
     drives to its target and crept into the wall's face beside a passage's mouth, then caught the corner as it turned
     for the path (gen31_0002). 0.15: the teacher's stop gap (`imitation.stop_gap`), chosen against 0.05 on 40
     validation maps; 0: the target stays behind the wall, as trained (docs/staf.md)."""
+    sight_clear: bool = True
+    """A robot that aims at the path instead of a target out of sight (`in_sight`) aims at the furthest point of the
+    path, up to where it would aim without this, whose straight way keeps a radius and `hold_short` (at least
+    `WAY_CLEARANCE`) from the obstacles (`StafPlan._clear_aim`): not across a wall's corner; false: at the path's point
+    1 m ahead wherever it lies, as trained (docs/staf.md)."""
     start_slots: bool = True
     """At the first step the robots take the team's slots, laid along the path, nearest to where they stand
     (Hungarian; robots are alike): a team whose formation faces another way than its path (`team.heading_deg` 180,

@@ -161,7 +161,11 @@ class StafPlan:
         if lost.any():
             own = self.frame.progress(pos[lost])
             s = np.clip(self.frame.progress(targets[lost]), own - SIGHT_REACH, own + SIGHT_REACH)
-            out[lost] = self.frame.at(s)[0]
+            if self.cfg.sight_clear:  # not across a wall's corner
+                keep = self.radius + max(self.cfg.hold_short, WAY_CLEARANCE)
+                out[lost] = geo.clear_aim(self.frame, self.geometry.clearance, pos[lost], own, s, keep)
+            else:
+                out[lost] = self.frame.at(s)[0]
         return out
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
