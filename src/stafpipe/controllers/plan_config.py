@@ -118,8 +118,8 @@ class PlanConfig:
     sight_clear: bool = True
     """A robot that aims at the path instead of a target out of sight (`in_sight`) aims at the furthest point of the
     path, up to where it would aim without this, whose straight way keeps a radius and `hold_short` (at least
-    `WAY_CLEARANCE`) from the obstacles (`StafPlan._clear_aim`): not across a wall's corner; false: at the path's point
-    1 m ahead wherever it lies, as trained (docs/staf.md)."""
+    `WAY_CLEARANCE`) from the obstacles (`plan_geometry.clear_arc`): not across a wall's corner; false: at the
+    path's point 1 m ahead wherever it lies, as trained (docs/staf.md)."""
     start_slots: bool = True
     """At the first step the robots take the team's slots, laid along the path, nearest to where they stand
     (Hungarian; robots are alike): a team whose formation faces another way than its path (`team.heading_deg` 180,

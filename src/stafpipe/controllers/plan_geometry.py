@@ -160,15 +160,14 @@ def ramp_around(tight: np.ndarray, ds: float, ramp: float) -> np.ndarray:
     return np.clip(1.0 - gap / max(ramp, 1e-9), 0.0, 1.0)
 
 
-def clear_aim(frame, clearance, pos: np.ndarray, own: np.ndarray, s: np.ndarray, keep: float) -> np.ndarray:
-    """(m, 2) for robots at `pos` (m, 2): the point of the path `frame` (a PathFrame) furthest from their own arc
-    lengths `own` (m,) towards `s` (m,), tried every tenth of the way, whose straight way from the robot keeps `keep`
-    from the obstacles (`clearance`: points (.., 2) -> distance (..)); the point at `s` where none does."""
+def clear_arc(frame, clearance, pos: np.ndarray, own: np.ndarray, s: np.ndarray, keep: float) -> np.ndarray:
+    """(m,) for robots at `pos` (m, 2): the arc length of the path `frame` (a PathFrame) furthest from their own arc
+    lengths `own` (m,) towards `s` (m,), tried every tenth of the way, whose point the robot reaches on a straight way
+    that keeps `keep` from the obstacles (`clearance`: points (.., 2) -> distance (..)); `s` where none does."""
     k = 11
     arcs = s[:, None] + (own - s)[:, None] * np.linspace(0.0, 1.0, k)[None]  # (m, k): from s back to own
     aims = frame.at(arcs)[0]
     t = np.linspace(0.0, 1.0, 2 * k)[None, None, :, None]  # a point every 0.1 m or less along a way of 2 m
     ways = pos[:, None, None] + t * (aims[:, :, None] - pos[:, None, None])  # (m, k, 2 k, 2)
     clear = (clearance(ways) >= keep).all(axis=2)
-    first = np.where(clear.any(axis=1), clear.argmax(axis=1), 0)
-    return aims[np.arange(len(pos)), first]
+    return arcs[np.arange(len(pos)), np.where(clear.any(axis=1), clear.argmax(axis=1), 0)]

@@ -163,9 +163,8 @@ class StafPlan:
             s = np.clip(self.frame.progress(targets[lost]), own - SIGHT_REACH, own + SIGHT_REACH)
             if self.cfg.sight_clear:  # not across a wall's corner
                 keep = self.radius + max(self.cfg.hold_short, WAY_CLEARANCE)
-                out[lost] = geo.clear_aim(self.frame, self.geometry.clearance, pos[lost], own, s, keep)
-            else:
-                out[lost] = self.frame.at(s)[0]
+                s = geo.clear_arc(self.frame, self.geometry.clearance, pos[lost], own, s, keep)
+            out[lost] = self.frame.at(s)[0]
         return out
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
