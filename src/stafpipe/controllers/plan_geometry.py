@@ -167,7 +167,7 @@ def clear_arc(frame, clearance, pos: np.ndarray, own: np.ndarray, s: np.ndarray,
     k = 11
     arcs = s[:, None] + (own - s)[:, None] * np.linspace(0.0, 1.0, k)[None]  # (m, k): from s back to own
     aims = frame.at(arcs)[0]
-    t = np.linspace(0.0, 1.0, 2 * k)[None, None, :, None]  # a point every 0.1 m or less along a way of 2 m
+    t = np.linspace(0.0, 1.0, 2 * k)[None, None, :, None]  # 22 points: 0.1 m apart on a way of 2.1 m (1 m ahead)
     ways = pos[:, None, None] + t * (aims[:, :, None] - pos[:, None, None])  # (m, k, 2 k, 2)
     clear = (clearance(ways) >= keep).all(axis=2)
     return arcs[np.arange(len(pos)), np.where(clear.any(axis=1), clear.argmax(axis=1), 0)]
