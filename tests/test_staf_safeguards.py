@@ -116,7 +116,7 @@ def test_a_column_placed_the_other_way_round_follows_its_robots(tmp_path) -> Non
         idx = plan.order[j]
         s = plan.frame.length / 2
         plan.hold[j], plan.anchor[j], plan.split_frac = None, s, 1.0  # moving, in file, slid into its subteam
-        plan.file_weights[j][:] = 1.0
+        plan.file_weights[j] = np.ones_like(plan.file_weights[j])  # (shared by equal-sized subteams: not in place)
         plan.ranks[j] = np.arange(len(idx))  # robot idx[0] in front ...
         slots = plan.slots[j].copy()
         behind = plan.frame.at(s - 1.0 * np.arange(len(idx))[::-1])[0]  # ... but standing at the back

@@ -253,8 +253,8 @@ class Geometry:
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """Clearance (..) of points (.., 2) read from the grid (the nearest cell; outside the world: the edge cell)."""
         xs, ys, clear = self.grid
-        j = np.clip(np.rint((points[..., 0] - xs[0]) / self.resolution).astype(int), 0, len(xs) - 1)
-        i = np.clip(np.rint((points[..., 1] - ys[0]) / self.resolution).astype(int), 0, len(ys) - 1)
+        j = np.minimum(np.maximum(np.rint((points[..., 0] - xs[0]) / self.resolution).astype(int), 0), len(xs) - 1)
+        i = np.minimum(np.maximum(np.rint((points[..., 1] - ys[0]) / self.resolution).astype(int), 0), len(ys) - 1)
         return clear[i, j]
 
     def _visible(self, p: np.ndarray, q: np.ndarray, clearance: float) -> bool:
@@ -288,30 +288,35 @@ class PathFrame:
         self.unit = seg / self.seg_len[:, None]
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
         self.length = float(self.cum[-1])
+        self.heading = np.arctan2(self.unit[:, 1], self.unit[:, 0])
+        # where a projection may fall on each segment: the first reaches back when extended
+        self.seg_from = np.zeros(len(self.seg_len))
+        if extend:
+            self.seg_from[0] = -np.inf
+        # np.minimum/np.maximum below, not np.clip: the same values at a fraction of the call's cost (the plan calls
+        # these several times per control step: benchmarks/staf_decision_time.py)
 
     def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points (.., 2) and headings (..) at arc lengths s (clipped to the path, or only at its end if extended)."""
-        s = np.clip(np.asarray(s, float), -np.inf if self.extend else 0.0, self.length)
-        k = np.clip(np.searchsorted(self.cum, s, side="right") - 1, 0, len(self.seg_len) - 1)
+        s = np.asarray(s, float)
+        s = np.minimum(s if self.extend else np.maximum(s, 0.0), self.length)
+        k = np.minimum(np.maximum(np.searchsorted(self.cum, s, side="right") - 1, 0), len(self.seg_len) - 1)
         point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
-        return point, np.arctan2(self.unit[k, 1], self.unit[k, 0])
+        return point, self.heading[k]
 
     def progress(self, points: np.ndarray) -> np.ndarray:
         """Arc length (P,) of each point's projection on the path."""
         t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
-        if self.extend:  # the first segment reaches back
-            lo = np.zeros(len(self.seg_len))
-            lo[0] = -np.inf
-            t = np.clip(t, lo, self.seg_len)
-        else:
-            t = np.clip(t, 0.0, self.seg_len)
+        t = np.minimum(np.maximum(t, self.seg_from), self.seg_len)
         proj = self.path[None, :-1] + t[..., None] * self.unit[None]
-        k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
+        off = points[:, None] - proj
+        k = np.sqrt((off * off).sum(axis=-1)).argmin(axis=1)  # np.linalg.norm's own sum, without its wrapper
         return self.cum[k] + t[np.arange(len(points)), k]
 
-    def lateral(self, points: np.ndarray) -> np.ndarray:
-        """Signed distance (P,) of each point from the path, left positive."""
-        point, heading = self.at(self.progress(points))
+    def lateral(self, points: np.ndarray, progress: np.ndarray | None = None) -> np.ndarray:
+        """Signed distance (P,) of each point from the path, left positive; `progress`: the points' `progress` where
+        the caller has it already."""
+        point, heading = self.at(self.progress(points) if progress is None else progress)
         d = points - point
         return np.cos(heading) * d[:, 1] - np.sin(heading) * d[:, 0]
 

@@ -3,6 +3,7 @@ and targets kept apart (the path's arc-length frame is `geometry.PathFrame`)."""
 
 from __future__ import annotations
 
+import functools
 from itertools import permutations
 
 import numpy as np
@@ -33,8 +34,10 @@ def separated(
 
     out = np.array(points, dtype=float)
     if bounds is not None:
-        out = np.clip(out, *bounds)
+        out = np.minimum(np.maximum(out, bounds[0]), bounds[1])  # np.clip's values without its call overhead
     for _ in range(rounds):
+        if len(out) <= 32 and not _any_closer(out, distance - 1e-9):  # most steps: no pair to push, no tree
+            break
         pairs = cKDTree(out).query_pairs(distance - 1e-9, output_type="ndarray")
         if len(pairs) == 0:
             break
@@ -46,13 +49,25 @@ def separated(
         np.add.at(out, i, push)
         np.add.at(out, j, -push)
         if bounds is not None:
-            out = np.clip(out, *bounds)
+            out = np.minimum(np.maximum(out, bounds[0]), bounds[1])
     return out
 
 
+def _any_closer(points: np.ndarray, distance: float) -> bool:
+    """Whether two of a few points are within `distance` (the k-d tree's pair test, on all n^2 pairs at once)."""
+    gap = points[:, None, :] - points[None, :, :]
+    square = (gap * gap).sum(axis=-1)
+    np.fill_diagonal(square, np.inf)
+    return bool(square.min() <= distance * distance)
+
+
+@functools.lru_cache(maxsize=256)
 def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
-    """Slots of a k-robot formation at spacing 1 (a single robot: the origin)."""
-    return np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
+    """Slots of a k-robot formation at spacing 1 (a single robot: the origin); read-only, computed once per shape
+    (the step that splits lays out every subteam: benchmarks/staf_decision_time.py)."""
+    slots = np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
+    slots.flags.writeable = False
+    return slots
 
 
 def lateral_clearance(

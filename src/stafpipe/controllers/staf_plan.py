@@ -79,7 +79,21 @@ class StafPlan:
         # the whole team walks in single file only where it will not split (it splits before the narrow part)
         alone = narrow.any() and self.m_wanted <= 1
         self.file_weight = self._file_weights(self.full_slots / self.spacing) if alone else self.clear * 0.0
+        # what the split lays out for a subteam of k robots depends on k alone: worked out here, once per episode, so
+        # the step that splits does only what depends on where the robots are (benchmarks/staf_decision_time.py)
+        self.subteam_shapes = [self._subteam_shape(k) for k in range(self.n + 1)] if self.m_wanted > 1 else []
         self.reset()
+
+    def _subteam_shape(self, k: int) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+        """(unit-spacing slots, depth along the path, single-file weights, column ranks) of a k-robot subteam."""
+        unit = unit_slots(self.kind, k, self.angle)
+        depth = extent(unit * self.spacing, self.radius)[0]
+        weights = self._file_weights(unit)
+        if weights.any():  # room for the column the subteam becomes in single file
+            depth = max(depth, (k - 1) * self.spacing + 2 * self.radius)
+        rank = column_rank(unit)
+        weights.flags.writeable = rank.flags.writeable = False  # shared by every subteam of k robots
+        return unit, depth, weights, rank
 
     def _file_weights(self, unit: np.ndarray) -> np.ndarray:
         """(path samples,) how far a formation of unit-spacing slots `unit` must be a column there (0..1): 1 where it
@@ -132,8 +146,8 @@ class StafPlan:
             targets = separated(targets, 2 * self.radius + self.cfg.target_gap, bounds=inside)
         if self.cfg.in_sight:
             targets = self._in_sight(pos, targets, dt)
-        if self.cfg.in_world:
-            targets = np.clip(targets, *self.bounds)
+        if self.cfg.in_world:  # np.clip's values without its call overhead (a cost of every control step)
+            targets = np.minimum(np.maximum(targets, self.bounds[0]), self.bounds[1])
         return targets
 
     def _in_sight(self, pos: np.ndarray, targets: np.ndarray, dt: float) -> np.ndarray:
@@ -216,21 +230,20 @@ class StafPlan:
             from stafpipe.highlevel.partition import balance_sizes
 
             labels = balance_sizes(labels, pos, self.m_wanted)
-        teams = [np.flatnonzero(labels == j) for j in np.unique(labels)]
+        by_label = np.argsort(labels, kind="stable")  # the robots of each subteam, in index order
+        teams = np.split(by_label, np.flatnonzero(np.diff(labels[by_label])) + 1)
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
-        lateral = self.frame.lateral(pos)
-        teams.sort(key=lambda idx: -(progress[idx].mean() - np.abs(lateral[idx]).mean()))
+        lateral = self.frame.lateral(pos, progress)
+        off = np.abs(lateral)
+        teams.sort(key=lambda idx: -(progress[idx].sum() / len(idx) - off[idx].sum() / len(idx)))  # means
         if self.cfg.unblock:  # unless a waiting robot stands in the way of one that goes before it
             teams = geo.unblocked_order(teams, progress, lateral, self.radius)
         anchors: list[float] = []
         self.order, self.slots, self.file_weights, self.ranks = [], [], [], []
         last_depth = 0.0
         for idx in teams:  # a column along the path: the front subteam just ahead of the team, the others behind
-            unit = unit_slots(self.kind, len(idx), self.angle)
-            depth = extent(unit * self.spacing, self.radius)[0]
-            self.file_weights.append(self._file_weights(unit))
-            if self.file_weights[-1].any():  # room for the column the subteam becomes in single file
-                depth = max(depth, (len(idx) - 1) * self.spacing + 2 * self.radius)
+            unit, depth, weights, rank = self.subteam_shapes[len(idx)]
+            self.file_weights.append(weights)
             a = (
                 progress.max() + depth / 2
                 if not anchors
@@ -239,7 +252,7 @@ class StafPlan:
             perm = assign_slots(pos[idx], place(unit * self.spacing, *self.frame.at(a)))
             self.order.append(idx)
             self.slots.append(unit[perm])  # robot idx[k] takes slot perm[k]
-            self.ranks.append(column_rank(self.slots[-1]))
+            self.ranks.append(rank[perm])  # = column_rank(self.slots[-1]): the slots' ranks go with them
             anchors.append(a)
             last_depth = depth
         self.labels = np.zeros(self.n, dtype=int)

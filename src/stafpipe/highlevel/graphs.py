@@ -67,6 +67,15 @@ def radius_edges(pos: np.ndarray, radius: float) -> np.ndarray:
     return np.concatenate([pairs.T, pairs[:, ::-1].T], axis=1).astype(np.int64)
 
 
+def radius_adjacency(pos: np.ndarray, radius: float) -> np.ndarray:
+    """(n, n) bool: robots closer than `radius`, no self loops; `radius_edges` as a dense matrix, for small teams
+    (a KD-tree's setup costs more than all n^2 distances of ten robots)."""
+    gap = pos[:, None, :] - pos[None, :, :]
+    adj = np.einsum("ijk,ijk->ij", gap, gap) <= radius * radius
+    np.fill_diagonal(adj, False)
+    return adj
+
+
 def node_features(team: Team, features: Sequence[str]) -> np.ndarray:
     """(n, F) node features of one team, in the order `features` names them (see NODE_FEATURES)."""
     centre, goal_centre = team.pos.mean(axis=0), team.goal.mean(axis=0)

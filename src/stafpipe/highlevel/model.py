@@ -89,39 +89,48 @@ class DeepGraphCut(nn.Module):
 
 class NumpyGraphCut:
     """The same forward pass in numpy with dense attention, for deciding one small team fast (torch's per-op overhead
-    dominates below ~100 robots: measured on the 2-core development machine). A test checks it equals DeepGraphCut's
-    output."""
+    dominates below ~100 robots: measured on the 2-core development machine). Each layer's three products with h
+    (W^h, and W^a followed by a's two halves) are one product with their weights side by side: a^T W^a m is linear in
+    m, so a_1^T W^a and a_2^T W^a are folded into W^a's columns once (the same function to float rounding; the
+    decision step's cost, benchmarks/staf_decision_time.py). A test checks it equals DeepGraphCut's output."""
 
     def __init__(self, model: DeepGraphCut):
         self.cfg = model.cfg
+        heads, width = self.cfg.heads, self.cfg.hidden
         w = {k: v.detach().numpy().astype(np.float64) for k, v in model.state_dict().items()}
         self.w_v, self.b_v = w["w_v.weight"].T, w["w_v.bias"]
-        self.layers = [
-            (w[f"layers.{k}.w_a.weight"].T, w[f"layers.{k}.a"], w[f"layers.{k}.w_h.weight"].T)
-            for k in range(self.cfg.layers)
-        ]
+        self.layers = []
+        for k in range(self.cfg.layers):
+            w_a = w[f"layers.{k}.w_a.weight"].T.reshape(width, heads, width)  # (in, head, out)
+            a = w[f"layers.{k}.a"]
+            score_i = np.einsum("khw,hw->kh", w_a, a[:, :width])  # m -> a_1^T W^a m, per head
+            score_j = np.einsum("khw,hw->kh", w_a, a[:, width:])
+            self.layers.append(np.concatenate([w[f"layers.{k}.w_h.weight"].T, score_i, score_j], axis=1))
         self.tau = (w["tau.0.weight"].T, w["tau.0.bias"], w["tau.2.weight"].T, w["tau.2.bias"])
 
-    def __call__(self, x: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
-        """Y (n, m_max) for one team: node features x (n, F), directed edges (2, E)."""
+    def __call__(self, x: np.ndarray, edges: np.ndarray, m: int, adj: np.ndarray | None = None) -> np.ndarray:
+        """Y (n, m_max) for one team: node features x (n, F), directed edges (2, E); or `adj` (n, n) bool, adj[i, j]:
+        j sends to i, in place of the edges."""
         n, heads, width = len(x), self.cfg.heads, self.cfg.hidden
-        adj = np.zeros((n, n), dtype=bool)
-        adj[edges[1], edges[0]] = True  # adj[i, j]: j sends to i
+        if adj is None:
+            adj = np.zeros((n, n), dtype=bool)
+            adj[edges[1], edges[0]] = True
+        lonely = not adj.any(axis=1).all()  # a robot with no neighbour: its sum over neighbours is 0
+        mask = np.where(adj, 0.0, -np.inf)
         h = x @ self.w_v + self.b_v
-        for k, (w_a, a, w_h) in enumerate(self.layers):
-            wa = (h @ w_a).reshape(n, heads, width)
-            s_i = np.einsum("nhw,hw->hn", wa, a[:, :width])
-            s_j = np.einsum("nhw,hw->hn", wa, a[:, width:])
-            scores = s_i[:, :, None] + s_j[:, None, :]  # (H, i, j)
-            scores = (
-                np.maximum(scores, 0.0) if self.cfg.attention == "relu" else np.where(scores > 0, scores, 0.2 * scores)
-            )
-            scores = np.where(adj[None], scores, -np.inf)
+        split = heads * width
+        for k, fused in enumerate(self.layers):
+            z = h @ fused
+            wh = z[:, :split].reshape(n, heads, width).transpose(1, 0, 2)  # (H, n, W)
+            scores = z[:, split : split + heads].T[:, :, None] + z[:, split + heads :].T[:, None, :]  # (H, i, j)
+            scores = np.maximum(scores, 0.0 if self.cfg.attention == "relu" else 0.2 * scores) + mask
             peak = scores.max(axis=2, keepdims=True)
-            e = np.exp(scores - np.where(np.isfinite(peak), peak, 0.0))
-            alpha = e / np.maximum(e.sum(axis=2, keepdims=True), 1e-300)
-            wh = (h @ w_h).reshape(n, heads, width).transpose(1, 0, 2)  # (H, n, W)
-            h = (wh + alpha @ wh).mean(axis=0)
+            if lonely:
+                peak = np.where(np.isfinite(peak), peak, 0.0)
+            e = np.exp(scores - peak)
+            total = e.sum(axis=2, keepdims=True)
+            alpha = e / (np.maximum(total, 1e-300) if lonely else total)
+            h = (wh + alpha @ wh).sum(axis=0) / heads  # the heads' mean (np.mean's own sum and division)
             if k + 1 < len(self.layers):
                 h = np.maximum(h, 0.0)
         one_hot = np.zeros((n, self.cfg.m_max))

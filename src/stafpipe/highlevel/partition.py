@@ -20,10 +20,10 @@ def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
     n = len(labels)
     inside = labels[edges[0]] == labels[edges[1]]
     if n <= 64:  # small teams: transitive closure by repeated squaring beats scipy's setup cost
-        reach = np.eye(n, dtype=bool)
-        reach[edges[0][inside], edges[1][inside]] = True
+        reach = np.eye(n, dtype=np.float32)  # 0/1 throughout: sums of at most 64 ones are exact in float32
+        reach[edges[0][inside], edges[1][inside]] = 1.0
         for _ in range(max(1, int(np.ceil(np.log2(n))))):
-            reach = (reach.astype(np.float32) @ reach.astype(np.float32)) > 0
+            reach = np.minimum(reach @ reach, 1.0)
         return reach.argmax(axis=1)  # the lowest robot index reachable names the component
     graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
     return connected_components(graph, directed=False)[1]
@@ -38,6 +38,8 @@ def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> 
     labels = labels.copy()
     n = len(labels)
     m = min(m, n)
+    if _whole(labels, edges, m):  # the common case: nothing to repair (the loop below would change nothing)
+        return labels
     for _ in range(4 * n + 4):
         changed = False
         for j in range(m):
@@ -63,6 +65,13 @@ def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> 
         if not changed:
             break
     return labels
+
+
+def _whole(labels: np.ndarray, edges: np.ndarray, m: int) -> bool:
+    """Every one of the m subteams non-empty and connected: as many parts (`_subteam_parts`) as subteams."""
+    if np.bincount(labels, minlength=m)[:m].min() == 0:
+        return False
+    return int(np.bincount(_subteam_parts(labels, edges), minlength=len(labels)).astype(bool).sum()) == m
 
 
 def hard_assignment(probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
