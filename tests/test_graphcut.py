@@ -185,3 +185,22 @@ def test_connectivity_of_subteams_on_a_line(n: int) -> None:
     assert partition_stats(sandwich, pos, pos + 5, edges, 2)["connected"] == 0.0
     fixed = repair(sandwich, np.full((n, 2), 0.5), edges, 2)
     assert partition_stats(fixed, pos, pos + 5, edges, 2)["connected"] == 1.0 and set(fixed) == {0, 1}
+
+
+def test_the_plans_divider_decides_as_divide_does() -> None:
+    """STAF's plan divides a small team on a dense radius graph (highlevel/infer.py, `divider`): the same subteams as
+    `divide` on the k-d tree's edge list, for teams of every formation, size and m, some robots out of reach."""
+    from stafpipe.highlevel.infer import divide, divider
+
+    model, _ = load_checkpoint("")
+    decide = divider()
+    rng = np.random.default_rng(5)
+    for kind in ("circle", "wedge", "line", "square"):
+        for n in (3, 6, 10, 13):
+            for m in (2, 3, 4):
+                pos = place(formation_slots(kind, n, 1.0), rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi))
+                pos = pos + rng.normal(0.0, 0.3, pos.shape)
+                pos[0] += 30.0 * (n == 13)  # one robot far beyond the 2 m radius: a node with no neighbour
+                goal = pos + rng.uniform(5, 20) * np.array([np.cos(a := rng.uniform(0, 6.3)), np.sin(a)])
+                expected = divide(model, [Team(pos, goal, m)])[0]
+                assert np.array_equal(decide(pos, goal, m), expected), (kind, n, m)

@@ -182,16 +182,20 @@ def test_intermediate_gnn_is_the_printed_formula_with_linear_messages() -> None:
     receiver, sender = mask.nonzero(as_tuple=True)
     assert torch.allclose(full.act(own, edge, mask), full(own, edge, mask)[0])
     assert torch.allclose(full.act_sparse(own, receiver, edge[receiver, sender]), full(own, edge, mask)[0], atol=1e-6)
-    # a controller's frozen weights: the pair map computed once gives the very same bits, at 10 robots and 128 wide
-    wide = StafPolicy(PolicyConfig(hidden=128))
-    torch.nn.init.normal_(wide.b_msg)
-    frozen = wide.frozen_act()
-    with torch.inference_mode():
-        for seed in range(5):
-            g = torch.Generator().manual_seed(seed)
-            own, edge = torch.randn(1, 10, STAF_OWN, generator=g), torch.randn(1, 10, 10, STAF_EDGE, generator=g)
-            mask = torch.rand(1, 10, 10, generator=g) < 0.6
-            assert torch.equal(frozen(own, edge, mask), wide.act(own, edge, mask))
+    # a controller's frozen weights: the pair map computed once gives the very same bits, at 10 robots and 128 wide,
+    # with every option the forward has
+    for options in ({}, {"drive_input": True, "prior_gain": 2.0}, {"message": "linear"}):
+        wide = StafPolicy(PolicyConfig(hidden=128, **options))
+        for p in (wide.b_msg, wide.psi[2].weight, *([wide.w_drive] if wide.cfg.drive_input else [])):
+            torch.nn.init.normal_(p)
+        frozen = wide.frozen_act()
+        width = STAF_OWN + int(wide.cfg.drive_input)
+        with torch.inference_mode():
+            for seed in range(5):
+                g = torch.Generator().manual_seed(seed)
+                own, edge = torch.randn(1, 10, width, generator=g), torch.randn(1, 10, 10, STAF_EDGE, generator=g)
+                mask = torch.rand(1, 10, 10, generator=g) < 0.6
+                assert torch.equal(frozen(own, edge, mask), wide.act(own, edge, mask)), options
 
 
 def test_staf_features_are_robot_frame_and_pairwise_differences() -> None:

@@ -231,7 +231,8 @@ class StafPlan:
 
             labels = balance_sizes(labels, pos, self.m_wanted)
         by_label = np.argsort(labels, kind="stable")  # the robots of each subteam, in index order
-        teams = np.split(by_label, np.flatnonzero(np.diff(labels[by_label])) + 1)
+        ends = np.cumsum(np.bincount(labels)).tolist()
+        teams = [by_label[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True) if b > a]
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
         lateral = self.frame.lateral(pos, progress)
         off = np.abs(lateral)

@@ -89,24 +89,32 @@ class DeepGraphCut(nn.Module):
 
 class NumpyGraphCut:
     """The same forward pass in numpy with dense attention, for deciding one small team fast (torch's per-op overhead
-    dominates below ~100 robots: measured on the 2-core development machine). Each layer's three products with h
-    (W^h, and W^a followed by a's two halves) are one product with their weights side by side: a^T W^a m is linear in
-    m, so a_1^T W^a and a_2^T W^a are folded into W^a's columns once (the same function to float rounding; the
-    decision step's cost, benchmarks/staf_decision_time.py). A test checks it equals DeepGraphCut's output."""
+    dominates below ~100 robots: measured on the 2-core development machine). Fewer, larger products, the same
+    function to float rounding (the decision step's cost, benchmarks/staf_decision_time.py): each layer's three
+    products with h (W^h, and W^a followed by a's two halves: a^T W^a m is linear in m) are one product with their
+    weights side by side; W^v is folded into the first layer's (m_i = W^v p_i enters only through it); the heads'
+    mean's 1/H into the next layer's (ReLU(h / H) = ReLU(h) / H) or tau's; and the one-hot of m picks a row of tau's
+    first weights. A test checks it equals DeepGraphCut's output."""
 
     def __init__(self, model: DeepGraphCut):
         self.cfg = model.cfg
         heads, width = self.cfg.heads, self.cfg.hidden
         w = {k: v.detach().numpy().astype(np.float64) for k, v in model.state_dict().items()}
-        self.w_v, self.b_v = w["w_v.weight"].T, w["w_v.bias"]
-        self.layers = []
+        self.layers: list[np.ndarray] = []
         for k in range(self.cfg.layers):
             w_a = w[f"layers.{k}.w_a.weight"].T.reshape(width, heads, width)  # (in, head, out)
             a = w[f"layers.{k}.a"]
             score_i = np.einsum("khw,hw->kh", w_a, a[:, :width])  # m -> a_1^T W^a m, per head
             score_j = np.einsum("khw,hw->kh", w_a, a[:, width:])
-            self.layers.append(np.concatenate([w[f"layers.{k}.w_h.weight"].T, score_i, score_j], axis=1))
-        self.tau = (w["tau.0.weight"].T, w["tau.0.bias"], w["tau.2.weight"].T, w["tau.2.bias"])
+            fused = np.concatenate([w[f"layers.{k}.w_h.weight"].T, score_i, score_j], axis=1)
+            self.layers.append(fused / heads if k else fused)
+        w_v, b_v = w["w_v.weight"].T, w["w_v.bias"]
+        self.first_bias = b_v @ self.layers[0]
+        self.layers[0] = w_v @ self.layers[0]
+        w0, b0 = w["tau.0.weight"].T, w["tau.0.bias"]
+        self.tau_h = w0[:width] / heads
+        self.tau_m = w0[width:] + b0  # row m - 1: the one-hot of m's product, with the bias
+        self.tau_out = (w["tau.2.weight"].T, w["tau.2.bias"])
 
     def __call__(self, x: np.ndarray, edges: np.ndarray, m: int, adj: np.ndarray | None = None) -> np.ndarray:
         """Y (n, m_max) for one team: node features x (n, F), directed edges (2, E); or `adj` (n, n) bool, adj[i, j]:
@@ -117,26 +125,30 @@ class NumpyGraphCut:
             adj[edges[1], edges[0]] = True
         lonely = not adj.any(axis=1).all()  # a robot with no neighbour: its sum over neighbours is 0
         mask = np.where(adj, 0.0, -np.inf)
-        h = x @ self.w_v + self.b_v
         split = heads * width
-        for k, fused in enumerate(self.layers):
+        h = x
+        for k, fused in enumerate(self.layers):  # in place where it can be: each array is a step's own
             z = h @ fused
+            if k == 0:
+                z += self.first_bias
             wh = z[:, :split].reshape(n, heads, width).transpose(1, 0, 2)  # (H, n, W)
             scores = z[:, split : split + heads].T[:, :, None] + z[:, split + heads :].T[:, None, :]  # (H, i, j)
-            scores = np.maximum(scores, 0.0 if self.cfg.attention == "relu" else 0.2 * scores) + mask
+            np.maximum(scores, 0.0 if self.cfg.attention == "relu" else 0.2 * scores, out=scores)
+            scores += mask
             peak = scores.max(axis=2, keepdims=True)
             if lonely:
                 peak = np.where(np.isfinite(peak), peak, 0.0)
-            e = np.exp(scores - peak)
-            total = e.sum(axis=2, keepdims=True)
-            alpha = e / (np.maximum(total, 1e-300) if lonely else total)
-            h = (wh + alpha @ wh).sum(axis=0) / heads  # the heads' mean (np.mean's own sum and division)
+            scores -= peak
+            alpha = np.exp(scores, out=scores)
+            total = alpha.sum(axis=2, keepdims=True)
+            alpha /= np.maximum(total, 1e-300) if lonely else total
+            agg = alpha @ wh
+            agg += wh
+            h = agg.sum(axis=0)  # H x the heads' mean: 1/H is in the next weights
             if k + 1 < len(self.layers):
-                h = np.maximum(h, 0.0)
-        one_hot = np.zeros((n, self.cfg.m_max))
-        one_hot[:, m - 1] = 1.0
-        w0, b0, w1, b1 = self.tau
-        logits = np.maximum(np.concatenate([h, one_hot], axis=1) @ w0 + b0, 0.0) @ w1 + b1
+                np.maximum(h, 0.0, out=h)
+        w1, b1 = self.tau_out
+        logits = np.maximum(h @ self.tau_h + self.tau_m[m - 1], 0.0) @ w1 + b1
         logits[:, m:] = -np.inf
         e = np.exp(logits - logits.max(axis=1, keepdims=True))
         return e / e.sum(axis=1, keepdims=True)

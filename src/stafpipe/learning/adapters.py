@@ -160,10 +160,11 @@ class StafAdapter(Adapter):
     def step(self, obs: Observation, dt: float) -> Step:
         if self.shadows:
             self._aim = np.stack([p.step(obs.position[w], dt) for w, p in enumerate(self.shadows)])
-        target = np.stack([p.step(obs.position[w], dt) for w, p in enumerate(self.plans)])
+        # np.array stacks a list of equal arrays as np.stack does, at a fraction of its call overhead (every step)
+        target = np.array([p.step(obs.position[w], dt) for w, p in enumerate(self.plans)])
         if not self.shadows:
             self._aim = target
-        self._target, self._same = target, np.stack([p.same for p in self.plans])
+        self._target, self._same = target, np.array([p.same for p in self.plans])
         return Step(self.features(obs), target, target)
 
     def features(self, obs: Observation) -> Features:
@@ -178,7 +179,7 @@ class StafAdapter(Adapter):
         return staf_penalties(pos, vel, obs, self.plans, self.reward_cfg, radius)
 
     def subteams(self) -> np.ndarray:
-        return np.stack([p.labels for p in self.plans])
+        return np.array([p.labels for p in self.plans])
 
     def drain_events(self, w: int) -> list[tuple[str, list[int], str]]:
         return self.plans[w].drain_events()

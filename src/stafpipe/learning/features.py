@@ -37,7 +37,14 @@ def _norm(v: np.ndarray) -> np.ndarray:
 
 def to_robot_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Express world-frame vectors v (.., 2) in frames of heading (cos c, sin s): R(-heading) v."""
-    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
+    return stack_xy(c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1])
+
+
+def stack_xy(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(.., 2) from two (..) arrays: np.stack(axis=-1)'s result without its call overhead (every control step)."""
+    out = np.empty(x.shape + (2,), dtype=np.result_type(x, y))
+    out[..., 0], out[..., 1] = x, y
+    return out
 
 
 def to_robot_frames(vs: list[np.ndarray], c: np.ndarray, s: np.ndarray) -> np.ndarray:

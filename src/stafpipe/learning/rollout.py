@@ -9,6 +9,7 @@ import torch
 
 from stafpipe.learning.adapters import Adapter
 from stafpipe.learning.config import RewardConfig, TrainPPOConfig
+from stafpipe.learning.features import stack_xy
 from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.sensing import Observation
 from stafpipe.world import Worlds
@@ -32,7 +33,7 @@ def commands(actions: np.ndarray, heading: np.ndarray, max_speed: float) -> np.n
     """Policy outputs (robot frame, clipped to [-1, 1]) -> world-frame velocity commands (m/s)."""
     a = np.minimum(np.maximum(actions, -1.0), 1.0) * max_speed  # np.clip's values, without its call overhead
     c, s = np.cos(heading), np.sin(heading)
-    return np.stack([c * a[..., 0] - s * a[..., 1], s * a[..., 0] + c * a[..., 1]], axis=-1)
+    return stack_xy(c * a[..., 0] - s * a[..., 1], s * a[..., 0] + c * a[..., 1])
 
 
 def contact_penalties(worlds: Worlds, obs: Observation, rc: RewardConfig) -> np.ndarray:
