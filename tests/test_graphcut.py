@@ -204,3 +204,24 @@ def test_the_plans_divider_decides_as_divide_does() -> None:
                 goal = pos + rng.uniform(5, 20) * np.array([np.cos(a := rng.uniform(0, 6.3)), np.sin(a)])
                 expected = divide(model, [Team(pos, goal, m)])[0]
                 assert np.array_equal(decide(pos, goal, m), expected), (kind, n, m)
+
+
+@pytest.mark.parametrize("n", [10, 70])  # the dense closure and, beyond 64 robots, the edge-list check
+def test_connected_subteams_on_the_dense_graph_agrees_with_the_edge_list(n: int) -> None:
+    from stafpipe.highlevel.graphs import radius_adjacency
+    from stafpipe.highlevel.partition import _whole, connected_subteams
+
+    rng = np.random.default_rng(n)
+    seen = set()
+    for _ in range(200):
+        pos = rng.uniform(0, rng.uniform(1.0, 2.5) * np.sqrt(n), (n, 2))
+        m = int(rng.integers(2, 5))
+        if rng.random() < 0.5:  # mostly scattered subteams
+            labels = rng.integers(0, m, n)
+        else:  # bands across the team: connected where the robots are dense enough
+            labels = np.minimum((m * np.argsort(np.argsort(pos[:, 0]))) // n, m - 1)
+        adj = radius_adjacency(pos, 2.0)
+        expected = _whole(labels, radius_edges(pos, 2.0), m)
+        assert connected_subteams(labels, adj, m) == expected
+        seen.add(expected)
+    assert seen == {True, False}  # both answers were checked

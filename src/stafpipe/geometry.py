@@ -7,6 +7,7 @@ exact up to that resolution (1/1200 of the world's larger side by default).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -289,6 +290,7 @@ class PathFrame:
         self.cum = np.concatenate([[0.0], np.cumsum(self.seg_len)])
         self.length = float(self.cum[-1])
         self.heading = np.arctan2(self.unit[:, 1], self.unit[:, 0])
+        self._cum, self._points, self._units = self.cum.tolist(), self.path.tolist(), self.unit.tolist()  # for `at`
         # where a projection may fall on each segment: the first reaches back when extended
         self.seg_from = np.zeros(len(self.seg_len))
         if extend:
@@ -298,6 +300,12 @@ class PathFrame:
 
     def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points (.., 2) and headings (..) at arc lengths s (clipped to the path, or only at its end if extended)."""
+        if isinstance(s, float | int):  # one arc length: the same arithmetic on plain floats, without array setup
+            s = min(float(s) if self.extend else max(float(s), 0.0), self.length)
+            k = min(max(bisect.bisect_right(self._cum, s) - 1, 0), len(self.seg_len) - 1)
+            along = s - self._cum[k]
+            (px, py), (ux, uy) = self._points[k], self._units[k]
+            return np.array([px + along * ux, py + along * uy]), self.heading[k]
         s = np.asarray(s, float)
         s = np.minimum(s if self.extend else np.maximum(s, 0.0), self.length)
         k = np.minimum(np.maximum(np.searchsorted(self.cum, s, side="right") - 1, 0), len(self.seg_len) - 1)

@@ -16,7 +16,8 @@ def extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
     """(depth along the heading, width across it) of formation-frame slots, bodies included."""
     if len(slots) < 2:
         return 2 * radius, 2 * radius
-    return float(np.ptp(slots[:, 0])) + 2 * radius, float(np.ptp(slots[:, 1])) + 2 * radius
+    x, y = slots[:, 0], slots[:, 1]  # np.ptp's max - min, without its wrapper (the plan calls this every step)
+    return float(x.max() - x.min()) + 2 * radius, float(y.max() - y.min()) + 2 * radius
 
 
 def separated(
@@ -149,7 +150,7 @@ def travel_frame(pos: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndar
     goal centre (the deep graph cut's `heading` feature). The cut's node features are world-frame vectors (STAF
     Sec. 3: p_i, g_i, q_i) and the network, trained on every heading, is not exactly equivariant; in this frame its
     subteams do not depend on which way the map points (docs/decisions.md, "The cut in the team's travel frame")."""
-    d = goal.mean(axis=0) - pos.mean(axis=0)
+    d = goal.sum(axis=0) / len(goal) - pos.sum(axis=0) / len(pos)  # the centres (np.mean's sums and divisions)
     back = -float(np.arctan2(d[1], d[0]))
     return place(pos, (0.0, 0.0), back), place(goal, (0.0, 0.0), back)
 

@@ -187,10 +187,10 @@ class StafPlan:
             return self._home(dt)
         progress = self.frame.progress(pos)
         if self.anchor[0] < 0:
-            self.anchor[0] = progress.mean()
+            self.anchor[0] = progress.sum() / self.n  # the mean (np.mean's own sum and division, no wrapper)
             if self.cfg.start_slots:
                 self._take_start_slots(pos)
-        if not self.split_done and progress.mean() >= self.narrow_start - self.cfg.split_distance:
+        if not self.split_done and progress.sum() / self.n >= self.narrow_start - self.cfg.split_distance:
             self._split(pos, progress)
         passed = progress > self.narrow_end + self.radius
         if self.split_done and not self.merging and (passed.all() or self.anchor[0] >= self.frame.length):
@@ -280,10 +280,10 @@ class StafPlan:
         """Waiting targets of subteam j: its formation at the team's spacing, centred on the subteam's centroid and
         facing along the path there (STAF Sec. 3: each subteam keeps the formation type with its own robots)."""
         idx = self.order[j]
-        centre = pos[idx].mean(axis=0)
+        centre = pos[idx].sum(axis=0) / len(idx)  # means as np.mean takes them, without its wrapper's cost
         _, heading = self.frame.at(float(self.frame.progress(centre[None])[0]))
         slots = place(self.slots[j] * self.spacing, (0.0, 0.0), heading)
-        return slots - slots.mean(axis=0) + centre
+        return slots - slots.sum(axis=0) / len(slots) + centre
 
     def _start_regroup(self, pos: np.ndarray) -> None:
         """Every robot past the last narrow stretch, or the front subteam at the path's end: goal slots reassigned."""
@@ -374,7 +374,7 @@ class StafPlan:
                 and progress[self.order[j - 1]].min() >= progress[self.order[j]].max() + self.cfg.follow_gap
             ):
                 self.hold[j] = None
-                self.anchor[j] = max(self.anchor[j], float(progress[self.order[j]].mean()))
+                self.anchor[j] = max(self.anchor[j], float(progress[self.order[j]].sum() / len(self.order[j])))
 
     def _advance(self, progress: np.ndarray, dt: float) -> None:
         cap = self.frame.length
@@ -382,7 +382,7 @@ class StafPlan:
             if self.hold[j] is not None:
                 continue
             s = self.anchor[j] + self.cfg.speed * dt
-            lead_from = progress[idx].mean()
+            lead_from = progress[idx].sum() / len(idx)  # the mean
             if self.cfg.lead_past_end:  # column slots the path's end cuts short do not hold the anchor back
                 lead_from += self._cut_at_end(j)
             s = min(s, lead_from + self.cfg.max_lead)

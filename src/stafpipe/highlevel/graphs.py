@@ -7,6 +7,7 @@ so no padding or masks are needed and a team's result does not depend on the oth
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
@@ -78,21 +79,22 @@ def radius_adjacency(pos: np.ndarray, radius: float) -> np.ndarray:
 
 def node_features(team: Team, features: Sequence[str]) -> np.ndarray:
     """(n, F) node features of one team, in the order `features` names them (see NODE_FEATURES)."""
-    centre, goal_centre = team.pos.mean(axis=0), team.goal.mean(axis=0)
-    cols = []
-    for name in features:
+    centre, goal_centre = team.pos.sum(axis=0) / team.n, team.goal.sum(axis=0) / team.n  # np.mean's own sums
+    out = np.empty((team.n, 2 * len(features)), dtype=np.result_type(team.pos, team.goal))  # filled column pairs
+    for k, name in enumerate(features):
+        col = out[:, 2 * k : 2 * k + 2]
         if name == "pos":
-            cols.append(team.pos - centre)
+            col[:] = team.pos - centre
         elif name == "goal":
-            cols.append(team.goal - goal_centre)
+            col[:] = team.goal - goal_centre
         elif name == "heading":
             d = goal_centre - centre
-            cols.append(np.broadcast_to(d / max(float(np.linalg.norm(d)), 1e-9), team.pos.shape))
+            col[:] = d / max(math.sqrt(d @ d), 1e-9)  # np.linalg.norm of a vector is this root of its dot product
         elif name == "vel":
-            cols.append(team.vel if team.vel is not None else np.zeros_like(team.pos))
+            col[:] = team.vel if team.vel is not None else 0.0
         else:
             raise ValueError(f"unknown node feature {name!r}; known: {list(NODE_FEATURES)}")
-    return np.concatenate(cols, axis=1)
+    return out
 
 
 class TeamGraph(NamedTuple):

@@ -10,7 +10,7 @@ import torch
 from stafpipe.highlevel.config import HighLevelConfig
 from stafpipe.highlevel.graphs import Team, TeamGraph, collate, node_features, radius_adjacency, team_graph
 from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut
-from stafpipe.highlevel.partition import choose_m, hard_assignment
+from stafpipe.highlevel.partition import choose_m, connected_subteams, hard_assignment
 
 SMALL_TEAM = 64
 """A single team up to this size is decided by the numpy forward pass (same output, a fraction of the time)."""
@@ -80,6 +80,9 @@ def divider(checkpoint: str = ""):
         adj = radius_adjacency(team.pos, model.cfg.radius)
         m = min(m, model.cfg.m_max)
         y = fast(node_features(team, model.cfg.features), np.zeros((2, 0), dtype=np.int64), m, adj=adj)
+        labels = y[:, :m].argmax(axis=1)
+        if connected_subteams(labels, adj, m):  # nothing for `repair` to change: skip building its edge list
+            return labels
         return hard_assignment(y, np.array(np.nonzero(adj)), m)
 
     return divide_team

@@ -74,6 +74,21 @@ def _whole(labels: np.ndarray, edges: np.ndarray, m: int) -> bool:
     return int(np.bincount(_subteam_parts(labels, edges), minlength=len(labels)).astype(bool).sum()) == m
 
 
+def connected_subteams(labels: np.ndarray, adj: np.ndarray, m: int) -> bool:
+    """`_whole` on a small team's dense radius graph `adj` (n, n) bool: every one of the m subteams non-empty and
+    connected, i.e. the transitive closure of the edges inside subteams joins exactly the robots of one subteam."""
+    if len(labels) > 64:
+        return _whole(labels, np.array(np.nonzero(adj)), m)
+    if np.bincount(labels, minlength=m)[:m].min() == 0:
+        return False
+    same = labels[:, None] == labels[None, :]
+    reach = (adj & same).astype(np.float32)  # 0/1 throughout, as in `_subteam_parts`
+    np.fill_diagonal(reach, 1.0)
+    for _ in range(max(1, int(np.ceil(np.log2(len(labels)))))):
+        reach = np.minimum(reach @ reach, 1.0)
+    return bool(((reach > 0) == same).all())
+
+
 def hard_assignment(probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
     """argmax of Y over the first m subteams, then `repair`."""
     return repair(probs[:, :m].argmax(axis=1), probs, edges, m)
