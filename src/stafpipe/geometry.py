@@ -254,9 +254,10 @@ class Geometry:
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """Clearance (..) of points (.., 2) read from the grid (the nearest cell; outside the world: the edge cell)."""
         xs, ys, clear = self.grid
-        j = np.minimum(np.maximum(np.rint((points[..., 0] - xs[0]) / self.resolution).astype(int), 0), len(xs) - 1)
-        i = np.minimum(np.maximum(np.rint((points[..., 1] - ys[0]) / self.resolution).astype(int), 0), len(ys) - 1)
-        return clear[i, j]
+        # both axes at once (the plan reads the grid at every control step): the nearest cell, within the grid
+        cell = np.rint((points - (xs[0], ys[0])) / self.resolution).astype(int)
+        cell = np.minimum(np.maximum(cell, 0), (len(xs) - 1, len(ys) - 1))
+        return clear[cell[..., 1], cell[..., 0]]
 
     def _visible(self, p: np.ndarray, q: np.ndarray, clearance: float) -> bool:
         k = max(2, int(np.linalg.norm(q - p) / (self.resolution / 2)) + 1)

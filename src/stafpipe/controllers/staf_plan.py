@@ -156,7 +156,7 @@ class StafPlan:
         own (the path keeps clear of obstacles, so the robot goes round the wall along it). A robot sliding round a
         bollard sees its target again sooner, and keeps it."""
         way = targets - pos
-        length = np.linalg.norm(way, axis=1)
+        length = np.sqrt((way * way).sum(axis=1))  # np.linalg.norm's own sum and root, without its wrapper
         # a way inside the robot's free disc is in sight; the others are checked point by point (two grid cells of
         # margin: the grid's nearest-cell error at both ends, so the result is the same as checking all)
         blocked = self.geometry.clearance(pos) < length + SIGHT_STEP / 2 + 2 * self.geometry.resolution

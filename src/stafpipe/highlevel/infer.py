@@ -9,7 +9,7 @@ import torch
 
 from stafpipe.highlevel.config import HighLevelConfig
 from stafpipe.highlevel.graphs import Team, TeamGraph, collate, node_features, radius_adjacency, team_graph
-from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut
+from stafpipe.highlevel.model import DeepGraphCut, NumpyGraphCut, softmax_rows
 from stafpipe.highlevel.partition import choose_m, connected_subteams, hard_assignment
 
 SMALL_TEAM = 64
@@ -79,10 +79,10 @@ def divider(checkpoint: str = ""):
         # decision-time budget (benchmarks/staf_decision_time.py); a test checks both give the same labels
         adj = radius_adjacency(team.pos, model.cfg.radius)
         m = min(m, model.cfg.m_max)
-        y = fast(node_features(team, model.cfg.features), np.zeros((2, 0), dtype=np.int64), m, adj=adj)
-        labels = y[:, :m].argmax(axis=1)
-        if connected_subteams(labels, adj, m):  # nothing for `repair` to change: skip building its edge list
+        logits = fast.logits(node_features(team, model.cfg.features), np.zeros((2, 0), dtype=np.int64), m, adj=adj)
+        labels = logits[:, :m].argmax(axis=1)  # Y's argmax: the softmax keeps each row's order
+        if connected_subteams(labels, adj, m):  # nothing for `repair` to change: no Y, no edge list
             return labels
-        return hard_assignment(y, np.array(np.nonzero(adj)), m)
+        return hard_assignment(softmax_rows(logits, m), np.array(np.nonzero(adj)), m)
 
     return divide_team

@@ -119,6 +119,10 @@ class NumpyGraphCut:
     def __call__(self, x: np.ndarray, edges: np.ndarray, m: int, adj: np.ndarray | None = None) -> np.ndarray:
         """Y (n, m_max) for one team: node features x (n, F), directed edges (2, E); or `adj` (n, n) bool, adj[i, j]:
         j sends to i, in place of the edges."""
+        return softmax_rows(self.logits(x, edges, m, adj), m)
+
+    def logits(self, x: np.ndarray, edges: np.ndarray, m: int, adj: np.ndarray | None = None) -> np.ndarray:
+        """tau's logits (n, m_max) before the softmax (its argmax over the first m columns is Y's)."""
         n, heads, width = len(x), self.cfg.heads, self.cfg.hidden
         if adj is None:
             adj = np.zeros((n, n), dtype=bool)
@@ -148,7 +152,12 @@ class NumpyGraphCut:
             if k + 1 < len(self.layers):
                 np.maximum(h, 0.0, out=h)
         w1, b1 = self.tau_out
-        logits = np.maximum(h @ self.tau_h + self.tau_m[m - 1], 0.0) @ w1 + b1
-        logits[:, m:] = -np.inf
-        e = np.exp(logits - logits.max(axis=1, keepdims=True))
-        return e / e.sum(axis=1, keepdims=True)
+        return np.maximum(h @ self.tau_h + self.tau_m[m - 1], 0.0) @ w1 + b1
+
+
+def softmax_rows(logits: np.ndarray, m: int) -> np.ndarray:
+    """Y (n, m_max) from tau's logits: a softmax over each row's first m columns, the others exactly 0."""
+    logits = logits.copy()
+    logits[:, m:] = -np.inf
+    e = np.exp(logits - logits.max(axis=1, keepdims=True))
+    return e / e.sum(axis=1, keepdims=True)
