@@ -174,14 +174,14 @@ def test_numpy_forward_equals_the_torch_network() -> None:
             assert np.allclose(fast(g.x, g.edges, team.m), expected, atol=1e-5)
 
 
-@pytest.mark.parametrize("n", [20, 70])  # the dense closure (n <= 64) and the scipy path
+@pytest.mark.parametrize("n", [10, 20, 70])  # the search (n <= 16), the dense closure (n <= 64), scipy
 def test_connectivity_of_subteams_on_a_line(n: int) -> None:
     pos = np.stack([np.arange(n, dtype=float), np.zeros(n)], axis=1)
     edges = radius_edges(pos, 1.5)  # each robot sees its two neighbours
     halves = np.repeat([0, 1], n // 2)
     assert partition_stats(halves, pos, pos + 5, edges, 2)["connected"] == 1.0
     sandwich = np.zeros(n, dtype=int)
-    sandwich[5:10] = 1
+    sandwich[n // 4 : n // 2] = 1  # robots of subteam 0 on both sides of it
     assert partition_stats(sandwich, pos, pos + 5, edges, 2)["connected"] == 0.0
     fixed = repair(sandwich, np.full((n, 2), 0.5), edges, 2)
     assert partition_stats(fixed, pos, pos + 5, edges, 2)["connected"] == 1.0 and set(fixed) == {0, 1}
@@ -225,3 +225,24 @@ def test_connected_subteams_on_the_dense_graph_agrees_with_the_edge_list(n: int)
         assert connected_subteams(labels, adj, m) == expected
         seen.add(expected)
     assert seen == {True, False}  # both answers were checked
+
+
+def test_subteam_parts_are_named_by_their_lowest_robot_on_every_path() -> None:
+    """`_subteam_parts` searches lists up to 16 robots and squares a matrix up to 64: the same ids as scipy's
+    components named by their lowest robot."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from stafpipe.highlevel.partition import _subteam_parts
+
+    rng = np.random.default_rng(11)
+    for n in (2, 9, 16, 17, 40):
+        for _ in range(30):
+            pos = rng.uniform(0, rng.uniform(1.0, 3.0) * np.sqrt(n), (n, 2))
+            labels = rng.integers(0, 3, n)
+            edges = radius_edges(pos, 2.0)
+            inside = labels[edges[0]] == labels[edges[1]]
+            graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
+            comp = connected_components(graph, directed=False)[1]
+            lowest = np.array([np.flatnonzero(comp == c).min() for c in comp])
+            assert np.array_equal(_subteam_parts(labels, edges), lowest), n

@@ -19,6 +19,8 @@ def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
     subteams)."""
     n = len(labels)
     inside = labels[edges[0]] == labels[edges[1]]
+    if n <= 16:  # a few robots: a search on plain lists (the plan's split decides ten robots within a step)
+        return np.array(_parts_by_search(n, edges[0][inside].tolist(), edges[1][inside].tolist()))
     if n <= 64:  # small teams: transitive closure by repeated squaring beats scipy's setup cost
         reach = np.eye(n, dtype=np.float32)  # 0/1 throughout: sums of at most 64 ones are exact in float32
         reach[edges[0][inside], edges[1][inside]] = 1.0
@@ -27,6 +29,25 @@ def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
         return reach.argmax(axis=1)  # the lowest robot index reachable names the component
     graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
     return connected_components(graph, directed=False)[1]
+
+
+def _parts_by_search(n: int, src: list[int], dst: list[int]) -> list[int]:
+    """Component id of each of n nodes along the edges src -> dst (both directions listed): its lowest node, as the
+    closure below names it (starts in index order: the first node a search reaches is its component's lowest)."""
+    near: list[list[int]] = [[] for _ in range(n)]
+    for i, j in zip(src, dst, strict=True):
+        near[i].append(j)
+    part = [-1] * n
+    for start in range(n):
+        if part[start] >= 0:
+            continue
+        part[start], stack = start, [start]
+        while stack:
+            for j in near[stack.pop()]:
+                if part[j] < 0:
+                    part[j] = start
+                    stack.append(j)
+    return part
 
 
 def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
