@@ -401,7 +401,8 @@ class StafPlan:
         weight = self._file_weight(j)
         if weight == 0.0:
             return 0.0
-        return weight * float(np.maximum(self._column_arcs(j) - self.frame.length, 0.0).mean())
+        past = np.maximum(self._column_arcs(j) - self.frame.length, 0.0)
+        return weight * float(past.sum() / len(past))  # the mean
 
     def _short_of_taken(self, j: int) -> float:
         """The furthest subteam j's anchor may go while merging: its front `follow_gap` behind the nearest goal slot
@@ -487,14 +488,13 @@ class StafPlan:
                 self.ranks[j] = rank
 
     def _file_weight(self, j: int) -> float:
-        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column."""
-        if not self.file_weights[j].any():
-            return 0.0
+        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column (called
+        several times a step: one reduction, no wrapper)."""
         half = (len(self.order[j]) - 1) / 2 * self.spacing
         lo = int(max(0.0, self.anchor[j] - half) / self.ds)
         hi = int(max(0.0, self.anchor[j] + half) / self.ds) + 1
         window = self.file_weights[j][lo:hi]
-        return float(window.max()) if len(window) else 0.0
+        return float(np.maximum.reduce(window)) if len(window) else 0.0
 
     @property
     def same(self) -> np.ndarray:
