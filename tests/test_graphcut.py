@@ -246,3 +246,23 @@ def test_subteam_parts_are_named_by_their_lowest_robot_on_every_path() -> None:
             comp = connected_components(graph, directed=False)[1]
             lowest = np.array([np.flatnonzero(comp == c).min() for c in comp])
             assert np.array_equal(_subteam_parts(labels, edges), lowest), n
+
+
+def test_repair_on_lists_takes_the_same_steps_as_on_arrays() -> None:
+    """Up to 16 robots `repair` runs on plain lists: the same labels as the array version, on random teams whose
+    argmax subteams are empty or split (every branch of the repair), with tied probabilities too."""
+    from stafpipe.highlevel.partition import _repair_arrays, _repair_lists
+
+    rng = np.random.default_rng(7)
+    changed = 0
+    for _ in range(400):
+        n = int(rng.integers(2, 17))
+        m = min(n, int(rng.integers(1, 6)))  # as `hard_assignment` gives it: labels below m, m at most n
+        pos = rng.uniform(0, rng.uniform(1.0, 3.0) * np.sqrt(n), (n, 2))
+        probs = rng.random((n, 5)) if rng.random() < 0.7 else np.round(rng.random((n, 5)), 1)  # ties
+        labels = rng.integers(0, m, n)
+        edges = radius_edges(pos, 2.0)
+        expected = _repair_arrays(labels, probs, edges, m)
+        assert np.array_equal(_repair_lists(labels, probs, edges, m), expected)
+        changed += not np.array_equal(expected, labels)
+    assert changed > 100  # most cases needed a repair

@@ -56,6 +56,13 @@ def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> 
     Empty subteam j: takes the robot most likely to be in j from the largest subteam. Disconnected subteam: each part
     but the largest moves to the subteam it shares most edges with (if it touches one). Repeats until nothing changes.
     """
+    if len(labels) <= 16:  # a few robots (the plan's split, within a control step): the same steps on lists
+        return _repair_lists(labels, probs, edges, m)
+    return _repair_arrays(labels, probs, edges, m)
+
+
+def _repair_arrays(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
+    """`repair` on arrays (any team size)."""
     labels = labels.copy()
     n = len(labels)
     m = min(m, n)
@@ -86,6 +93,49 @@ def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> 
         if not changed:
             break
     return labels
+
+
+def _first_most(values: list[int], length: int) -> int:
+    """np.bincount(values, minlength=length).argmax(): the most frequent value, the smallest of a tie."""
+    counts = [0] * max(length, max(values) + 1)
+    for v in values:
+        counts[v] += 1
+    return counts.index(max(counts))
+
+
+def _repair_lists(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
+    """`repair`'s steps, in the same order with the same ties, on plain lists (a test compares the two)."""
+    lab, p, src, dst = labels.tolist(), probs.tolist(), edges[0].tolist(), edges[1].tolist()
+    n = len(lab)
+    m = min(m, n)
+    for _ in range(4 * n + 4):
+        changed = False
+        for j in range(m):
+            if j not in lab:  # empty: the robot of the largest subteam most likely in j
+                largest = _first_most(lab, m)
+                donors = [i for i in range(n) if lab[i] == largest]
+                lab[max(donors, key=lambda i: p[i][j])] = j  # max keeps the first of equals, as argmax
+                changed = True
+        inside = [k for k in range(len(src)) if lab[src[k]] == lab[dst[k]]]
+        part = _parts_by_search(n, [src[k] for k in inside], [dst[k] for k in inside])
+        part_size = [0] * n
+        for q in part:
+            part_size[q] += 1
+        for j in range(m):
+            parts = sorted({part[i] for i in range(n) if lab[i] == j})
+            keep = max(parts, key=lambda q: part_size[q])
+            for q in (q for q in parts if q != keep):
+                others = [lab[dst[k]] for k in range(len(src)) if part[src[k]] == q and lab[dst[k]] != j]
+                if others:  # one move, then the parts are recomputed: they changed
+                    to = _first_most(others, m)
+                    lab = [to if part[i] == q else lab[i] for i in range(n)]
+                    changed = True
+                    break
+            if changed:
+                break
+        if not changed:
+            break
+    return np.array(lab, dtype=labels.dtype)
 
 
 def _whole(labels: np.ndarray, edges: np.ndarray, m: int) -> bool:
