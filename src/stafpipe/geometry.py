@@ -302,11 +302,11 @@ class PathFrame:
     def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points (.., 2) and headings (..) at arc lengths s (clipped to the path, or only at its end if extended)."""
         if isinstance(s, float | int):  # one arc length: the same arithmetic on plain floats, without array setup
-            s = min(float(s) if self.extend else max(float(s), 0.0), self.length)
-            k = min(max(bisect.bisect_right(self._cum, s) - 1, 0), len(self.seg_len) - 1)
-            along = s - self._cum[k]
-            (px, py), (ux, uy) = self._points[k], self._units[k]
-            return np.array([px + along * ux, py + along * uy]), self.heading[k]
+            one = min(float(s) if self.extend else max(float(s), 0.0), self.length)
+            i = min(max(bisect.bisect_right(self._cum, one) - 1, 0), len(self.seg_len) - 1)
+            along = one - self._cum[i]
+            (px, py), (ux, uy) = self._points[i], self._units[i]
+            return np.array([px + along * ux, py + along * uy]), self.heading[i]
         s = np.asarray(s, float)
         s = np.minimum(s if self.extend else np.maximum(s, 0.0), self.length)
         k = np.minimum(np.maximum(np.searchsorted(self.cum, s, side="right") - 1, 0), len(self.seg_len) - 1)

@@ -62,6 +62,13 @@ def _any_closer(points: np.ndarray, distance: float) -> bool:
     return bool(square.min() <= distance * distance)
 
 
+def members(labels: np.ndarray) -> list[np.ndarray]:
+    """The robots (index order) of each subteam present in `labels`, in label order: one sort, not a scan per label."""
+    by_label = np.argsort(labels, kind="stable")
+    ends = np.cumsum(np.bincount(labels)).tolist()
+    return [by_label[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True) if b > a]
+
+
 @functools.lru_cache(maxsize=256)
 def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
     """Slots of a k-robot formation at spacing 1 (a single robot: the origin); read-only, computed once per shape

@@ -79,8 +79,7 @@ class StafPlan:
         # the whole team walks in single file only where it will not split (it splits before the narrow part)
         alone = narrow.any() and self.m_wanted <= 1
         self.file_weight = self._file_weights(self.full_slots / self.spacing) if alone else self.clear * 0.0
-        # what the split lays out for a subteam of k robots depends on k alone: worked out here, once per episode, so
-        # the step that splits does only what depends on where the robots are (benchmarks/staf_decision_time.py)
+        # a k-robot subteam's layout depends on k alone: worked out once per episode, not in the step that splits
         self.subteam_shapes = [self._subteam_shape(k) for k in range(self.n + 1)] if self.m_wanted > 1 else []
         self.reset()
 
@@ -230,13 +229,10 @@ class StafPlan:
             from stafpipe.highlevel.partition import balance_sizes
 
             labels = balance_sizes(labels, pos, self.m_wanted)
-        by_label = np.argsort(labels, kind="stable")  # the robots of each subteam, in index order
-        ends = np.cumsum(np.bincount(labels)).tolist()
-        teams = [by_label[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True) if b > a]
+        teams = geo.members(labels)
         # the subteam furthest ahead and nearest the path passes first (a line abreast: the middle ones first)
         lateral = self.frame.lateral(pos, progress)
-        off = np.abs(lateral)
-        teams.sort(key=lambda idx: -(progress[idx].sum() / len(idx) - off[idx].sum() / len(idx)))  # means
+        teams.sort(key=lambda idx: -(progress[idx].sum() / len(idx) - np.abs(lateral[idx]).sum() / len(idx)))  # means
         if self.cfg.unblock:  # unless a waiting robot stands in the way of one that goes before it
             teams = geo.unblocked_order(teams, progress, lateral, self.radius)
         anchors: list[float] = []
@@ -401,8 +397,7 @@ class StafPlan:
         weight = self._file_weight(j)
         if weight == 0.0:
             return 0.0
-        past = np.maximum(self._column_arcs(j) - self.frame.length, 0.0)
-        return weight * float(past.sum() / len(past))  # the mean
+        return weight * float(np.maximum(self._column_arcs(j) - self.frame.length, 0.0).sum() / len(self.order[j]))
 
     def _short_of_taken(self, j: int) -> float:
         """The furthest subteam j's anchor may go while merging: its front `follow_gap` behind the nearest goal slot
@@ -488,8 +483,7 @@ class StafPlan:
                 self.ranks[j] = rank
 
     def _file_weight(self, j: int) -> float:
-        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column (called
-        several times a step: one reduction, no wrapper)."""
+        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column."""
         half = (len(self.order[j]) - 1) / 2 * self.spacing
         lo = int(max(0.0, self.anchor[j] - half) / self.ds)
         hi = int(max(0.0, self.anchor[j] + half) / self.ds) + 1
