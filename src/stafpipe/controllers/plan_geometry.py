@@ -4,6 +4,7 @@ and targets kept apart (the path's arc-length frame is `geometry.PathFrame`)."""
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from itertools import permutations
 
 import numpy as np
@@ -76,6 +77,21 @@ def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
     slots = np.zeros((1, 2)) if k < 2 else formation_slots(kind, k, 1.0, angle_deg)
     slots.flags.writeable = False
     return slots
+
+
+def subteam_shape(
+    k: int, kind: str, angle_deg: float, spacing: float, radius: float, file_weights: Callable[[np.ndarray], np.ndarray]
+) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """(unit-spacing slots, depth along the path, single-file weights, column ranks) of a k-robot subteam of the STAF
+    plan; `file_weights(unit slots)` says where along the path it walks in single file."""
+    unit = unit_slots(kind, k, angle_deg)
+    depth = extent(unit * spacing, radius)[0]
+    weights = file_weights(unit)
+    if weights.any():  # room for the column the subteam becomes in single file
+        depth = max(depth, (k - 1) * spacing + 2 * radius)
+    rank = column_rank(unit)
+    weights.flags.writeable = rank.flags.writeable = False  # shared by every subteam of k robots
+    return unit, depth, weights, rank
 
 
 def lateral_clearance(

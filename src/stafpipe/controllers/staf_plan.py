@@ -27,7 +27,6 @@ from stafpipe.controllers.plan_geometry import (
     follow_order,
     lateral_clearance,
     separated,
-    unit_slots,
 )
 from stafpipe.formations import assign_slots, place
 from stafpipe.geometry import PathFrame, obstacle_distance
@@ -80,19 +79,9 @@ class StafPlan:
         alone = narrow.any() and self.m_wanted <= 1
         self.file_weight = self._file_weights(self.full_slots / self.spacing) if alone else self.clear * 0.0
         # a k-robot subteam's layout depends on k alone: worked out once per episode, not in the step that splits
-        self.subteam_shapes = [self._subteam_shape(k) for k in range(self.n + 1)] if self.m_wanted > 1 else []
+        shape = (self.kind, self.angle, self.spacing, self.radius, self._file_weights)
+        self.subteam_shapes = [geo.subteam_shape(k, *shape) for k in range(self.n + 1)] if self.m_wanted > 1 else []
         self.reset()
-
-    def _subteam_shape(self, k: int) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
-        """(unit-spacing slots, depth along the path, single-file weights, column ranks) of a k-robot subteam."""
-        unit = unit_slots(self.kind, k, self.angle)
-        depth = extent(unit * self.spacing, self.radius)[0]
-        weights = self._file_weights(unit)
-        if weights.any():  # room for the column the subteam becomes in single file
-            depth = max(depth, (k - 1) * self.spacing + 2 * self.radius)
-        rank = column_rank(unit)
-        weights.flags.writeable = rank.flags.writeable = False  # shared by every subteam of k robots
-        return unit, depth, weights, rank
 
     def _file_weights(self, unit: np.ndarray) -> np.ndarray:
         """(path samples,) how far a formation of unit-spacing slots `unit` must be a column there (0..1): 1 where it
