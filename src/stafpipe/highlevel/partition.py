@@ -147,27 +147,17 @@ def _whole(labels: np.ndarray, edges: np.ndarray, m: int) -> bool:
 
 def connected_subteams(labels: np.ndarray, adj: np.ndarray, m: int) -> bool:
     """`_whole` on a small team's dense radius graph `adj` (n, n) bool: every one of the m subteams non-empty and
-    connected, i.e. a search along the edges inside subteams finds exactly m parts. Up to 16 robots the search runs
-    on plain lists (a third of the numpy closure's time at ten robots, measured); beyond, `_whole` decides."""
+    connected, i.e. the edges inside subteams join the robots into exactly m parts. Up to 16 robots on plain lists
+    (11 us at ten robots against 18 us for the numpy closure, measured); beyond, `_whole` decides."""
     n = len(labels)
     if n > 16:
         return _whole(labels, np.array(np.nonzero(adj)), m)
     label, rows = labels.tolist(), adj.tolist()
-    if len(set(label)) != m or min(label) < 0 or max(label) >= m:
+    if set(label) != set(range(m)):
         return False
-    seen, parts = [False] * n, 0
-    for start in range(n):
-        if seen[start]:
-            continue
-        parts += 1
-        seen[start], stack = True, [start]
-        while stack:
-            i = stack.pop()
-            for j, near in enumerate(rows[i]):
-                if near and not seen[j] and label[j] == label[i]:
-                    seen[j] = True
-                    stack.append(j)
-    return parts == m
+    inside = [(i, j) for i in range(n) for j in range(n) if rows[i][j] and label[i] == label[j]]
+    part = _parts_by_search(n, [i for i, _ in inside], [j for _, j in inside])
+    return len(set(part)) == m
 
 
 def hard_assignment(probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
