@@ -174,7 +174,7 @@ def test_numpy_forward_equals_the_torch_network() -> None:
             assert np.allclose(fast(g.x, g.edges, team.m), expected, atol=1e-5)
 
 
-@pytest.mark.parametrize("n", [10, 20, 70])  # the search (n <= 16), the dense closure (n <= 64), scipy
+@pytest.mark.parametrize("n", [10, 70])  # the search on lists (n <= 64) and scipy
 def test_connectivity_of_subteams_on_a_line(n: int) -> None:
     pos = np.stack([np.arange(n, dtype=float), np.zeros(n)], axis=1)
     edges = radius_edges(pos, 1.5)  # each robot sees its two neighbours
@@ -206,63 +206,66 @@ def test_the_plans_divider_decides_as_divide_does() -> None:
                 assert np.array_equal(decide(pos, goal, m), expected), (kind, n, m)
 
 
-@pytest.mark.parametrize("n", [10, 40])  # the search on lists and, beyond 16 robots, the edge-list check
-def test_connected_subteams_on_the_dense_graph_agrees_with_the_edge_list(n: int) -> None:
-    from stafpipe.highlevel.graphs import radius_adjacency
-    from stafpipe.highlevel.partition import _whole, connected_subteams
-
-    rng = np.random.default_rng(n)
-    seen = set()
-    for _ in range(200):
-        pos = rng.uniform(0, rng.uniform(1.0, 2.5) * np.sqrt(n), (n, 2))
-        m = int(rng.integers(2, 5))
-        if rng.random() < 0.5:  # mostly scattered subteams
-            labels = rng.integers(0, m, n)
-        else:  # bands across the team: connected where the robots are dense enough
-            labels = np.minimum((m * np.argsort(np.argsort(pos[:, 0]))) // n, m - 1)
-        adj = radius_adjacency(pos, 2.0)
-        expected = _whole(labels, radius_edges(pos, 2.0), m)
-        assert connected_subteams(labels, adj, m) == expected
-        seen.add(expected)
-    assert seen == {True, False}  # both answers were checked
-
-
-def test_subteam_parts_are_named_by_their_lowest_robot_on_every_path() -> None:
-    """`_subteam_parts` searches lists up to 16 robots and squares a matrix up to 64: the same ids as scipy's
-    components named by their lowest robot."""
+def _scipy_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Reference: scipy's components of the graph of edges inside subteams."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from stafpipe.highlevel.partition import _subteam_parts
-
-    rng = np.random.default_rng(11)
-    for n in (2, 9, 16, 17, 40):
-        for _ in range(30):
-            pos = rng.uniform(0, rng.uniform(1.0, 3.0) * np.sqrt(n), (n, 2))
-            labels = rng.integers(0, 3, n)
-            edges = radius_edges(pos, 2.0)
-            inside = labels[edges[0]] == labels[edges[1]]
-            graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
-            comp = connected_components(graph, directed=False)[1]
-            lowest = np.array([np.flatnonzero(comp == c).min() for c in comp])
-            assert np.array_equal(_subteam_parts(labels, edges), lowest), n
+    n, inside = len(labels), labels[edges[0]] == labels[edges[1]]
+    graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
 
 
-def test_repair_on_lists_takes_the_same_steps_as_on_arrays() -> None:
-    """Up to 16 robots `repair` runs on plain lists: the same labels as the array version, on random teams whose
-    argmax subteams are empty or split (every branch of the repair), with tied probabilities too."""
-    from stafpipe.highlevel.partition import _repair_arrays, _repair_lists
+def _random_teams(seed: int, sizes: tuple[int, ...], count: int):
+    """(labels, edges, m) of random teams, sparse to dense, with scattered or banded subteams."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        n = int(rng.choice(sizes))
+        m = min(n, int(rng.integers(1, 5)))
+        pos = rng.uniform(0, rng.uniform(1.0, 3.0) * np.sqrt(n), (n, 2))
+        if rng.random() < 0.5:
+            labels = rng.integers(0, m, n)
+        else:  # bands across the team: connected where the robots are dense enough
+            labels = np.minimum((m * np.argsort(np.argsort(pos[:, 0]))) // n, m - 1)
+        yield labels, radius_edges(pos, 2.0), m
+
+
+def test_subteam_parts_and_connectivity_agree_with_scipy() -> None:
+    """`_subteam_parts` searches lists up to 64 robots (ids: each part's lowest robot) and asks scipy beyond: the
+    same parts as scipy's components; `connected_subteams` says whole exactly where m parts cover m subteams."""
+    from stafpipe.highlevel.partition import _subteam_parts, connected_subteams
+
+    answers = set()
+    for labels, edges, m in _random_teams(11, (2, 9, 16, 40, 64, 65, 90), 200):
+        parts, reference = _subteam_parts(labels, edges), _scipy_parts(labels, edges)
+        assert len(set(zip(parts.tolist(), reference.tolist(), strict=True))) == len(set(reference.tolist()))
+        if len(labels) <= 64:
+            assert all(parts[i] == np.flatnonzero(reference == reference[i]).min() for i in range(len(labels)))
+        whole = set(labels.tolist()) == set(range(m)) and len(set(reference.tolist())) == m
+        assert connected_subteams(labels, edges, m) == whole
+        answers.add(whole)
+    assert answers == {True, False}  # both answers were checked
+
+
+def test_repair_leaves_every_subteam_whole_where_the_graph_is_connected() -> None:
+    """Where the radius graph is connected, repair ends with every one of the m subteams non-empty and connected
+    (a part cut off from its subteam always touches another one), and leaves a whole partition as it is."""
+    from scipy.sparse.csgraph import connected_components
+
+    from stafpipe.highlevel.partition import connected_subteams
 
     rng = np.random.default_rng(7)
-    changed = 0
-    for _ in range(400):
-        n = int(rng.integers(2, 17))
-        m = min(n, int(rng.integers(1, 6)))  # as `hard_assignment` gives it: labels below m, m at most n
-        pos = rng.uniform(0, rng.uniform(1.0, 3.0) * np.sqrt(n), (n, 2))
-        probs = rng.random((n, 5)) if rng.random() < 0.7 else np.round(rng.random((n, 5)), 1)  # ties
-        labels = rng.integers(0, m, n)
-        edges = radius_edges(pos, 2.0)
-        expected = _repair_arrays(labels, probs, edges, m)
-        assert np.array_equal(_repair_lists(labels, probs, edges, m), expected)
-        changed += not np.array_equal(expected, labels)
-    assert changed > 100  # most cases needed a repair
+    repaired = 0
+    for labels, edges, m in _random_teams(7, (4, 10, 16, 30, 80), 800):
+        n = len(labels)
+        graph = np.zeros((n, n))
+        graph[edges[0], edges[1]] = 1.0
+        if connected_components(graph, directed=False)[0] > 1:
+            continue
+        probs = rng.random((n, 4))
+        fixed = repair(labels, probs, edges, m)
+        assert connected_subteams(fixed, edges, m)
+        if connected_subteams(labels, edges, m):
+            assert np.array_equal(fixed, labels)
+        repaired += not np.array_equal(fixed, labels)
+    assert repaired > 60  # many of them needed a repair

@@ -80,9 +80,9 @@ def divider(checkpoint: str = ""):
         adj = radius_adjacency(team.pos, model.cfg.radius)
         m = min(m, model.cfg.m_max)
         logits = fast.logits(node_features(team, model.cfg.features), np.zeros((2, 0), dtype=np.int64), m, adj=adj)
-        labels = logits[:, :m].argmax(axis=1)  # Y's argmax: the softmax keeps each row's order
-        if connected_subteams(labels, adj, m):  # nothing for `repair` to change: no Y, no edge list
+        labels, edges = logits[:, :m].argmax(axis=1), np.array(np.nonzero(adj))  # Y's argmax: softmax keeps order
+        if connected_subteams(labels, edges, m):  # nothing for `repair` to change: no Y needed
             return labels
-        return hard_assignment(softmax_rows(logits, m), np.array(np.nonzero(adj)), m)
+        return hard_assignment(softmax_rows(logits, m), edges, m)
 
     return divide_team

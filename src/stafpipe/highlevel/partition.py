@@ -13,89 +13,58 @@ from sklearn.cluster import KMeans, SpectralClustering
 
 from stafpipe.formations import formation_slots
 
-
-def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """Component id of every robot in the graph of edges that stay inside a subteam (one scipy call for all
-    subteams)."""
-    n = len(labels)
-    inside = labels[edges[0]] == labels[edges[1]]
-    if n <= 16:  # a few robots: a search on plain lists (the plan's split decides ten robots within a step)
-        return np.array(_parts_by_search(n, edges[0][inside].tolist(), edges[1][inside].tolist()))
-    if n <= 64:  # small teams: transitive closure by repeated squaring beats scipy's setup cost
-        reach = np.eye(n, dtype=np.float32)  # 0/1 throughout: sums of at most 64 ones are exact in float32
-        reach[edges[0][inside], edges[1][inside]] = 1.0
-        for _ in range(max(1, int(np.ceil(np.log2(n))))):
-            reach = np.minimum(reach @ reach, 1.0)
-        return reach.argmax(axis=1)  # the lowest robot index reachable names the component
-    graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
+LIST_SEARCH_UP_TO = 64
+"""Up to this many robots the subteams' parts are found by a search on plain lists: a handful of robots is decided
+within a control step (STAF's split, benchmarks/staf_decision_time.py), where numpy's per-call cost dominates."""
 
 
-def _parts_by_search(n: int, src: list[int], dst: list[int]) -> list[int]:
-    """Component id of each of n nodes along the edges src -> dst (both directions listed): its lowest node, as the
-    closure below names it (starts in index order: the first node a search reaches is its component's lowest)."""
+def _neighbours(n: int, edges: np.ndarray) -> list[list[int]]:
+    """Each robot's neighbours (edges src -> dst, both directions listed), in edge order."""
     near: list[list[int]] = [[] for _ in range(n)]
-    for i, j in zip(src, dst, strict=True):
+    for i, j in zip(edges[0].tolist(), edges[1].tolist(), strict=True):
         near[i].append(j)
-    part = [-1] * n
-    for start in range(n):
+    return near
+
+
+def _parts(near: list[list[int]], label: list[int]) -> list[int]:
+    """Component id of each robot along the edges that stay inside a subteam: its component's lowest robot (starts
+    in index order, so the first robot a search reaches is its component's lowest)."""
+    part = [-1] * len(label)
+    for start in range(len(label)):
         if part[start] >= 0:
             continue
         part[start], stack = start, [start]
         while stack:
-            for j in near[stack.pop()]:
-                if part[j] < 0:
+            i = stack.pop()
+            for j in near[i]:
+                if part[j] < 0 and label[j] == label[i]:
                     part[j] = start
                     stack.append(j)
     return part
 
 
-def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
-    """Make every one of the m subteams non-empty, and each connected in the radius graph where the graph allows.
-
-    Empty subteam j: takes the robot most likely to be in j from the largest subteam. Disconnected subteam: each part
-    but the largest moves to the subteam it shares most edges with (if it touches one). Repeats until nothing changes.
-    """
-    if len(labels) <= 16:  # a few robots (the plan's split, within a control step): the same steps on lists
-        return _repair_lists(labels, probs, edges, m)
-    return _repair_arrays(labels, probs, edges, m)
-
-
-def _repair_arrays(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
-    """`repair` on arrays (any team size)."""
-    labels = labels.copy()
+def _subteam_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Component id of every robot in the graph of edges that stay inside a subteam: its lowest robot (the search on
+    lists for small teams), or scipy's component number."""
     n = len(labels)
-    m = min(m, n)
-    if _whole(labels, edges, m):  # the common case: nothing to repair (the loop below would change nothing)
-        return labels
-    for _ in range(4 * n + 4):
-        changed = False
-        for j in range(m):
-            if not (labels == j).any():
-                largest = np.bincount(labels, minlength=m).argmax()
-                donors = np.flatnonzero(labels == largest)
-                labels[donors[probs[donors, j].argmax()]] = j
-                changed = True
-        part = _subteam_parts(labels, edges)
-        part_size = np.bincount(part, minlength=n)
-        for j in range(m):
-            parts = np.unique(part[labels == j])
-            keep = parts[part_size[parts].argmax()]
-            for p in parts[parts != keep]:
-                others = labels[edges[1][part[edges[0]] == p]]
-                others = others[others != j]
-                if len(others):  # one move, then the parts are recomputed: they changed
-                    labels[part == p] = np.bincount(others, minlength=m).argmax()
-                    changed = True
-                    break
-            if changed:
-                break
-        if not changed:
-            break
-    return labels
+    if n <= LIST_SEARCH_UP_TO:
+        return np.array(_parts(_neighbours(n, edges), labels.tolist()), dtype=int)
+    inside = labels[edges[0]] == labels[edges[1]]
+    graph = coo_matrix((np.ones(inside.sum()), (edges[0][inside], edges[1][inside])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
 
 
-def _first_most(values: list[int], length: int) -> int:
+def connected_subteams(labels: np.ndarray, edges: np.ndarray, m: int) -> bool:
+    """Every one of the m subteams non-empty and connected: the edges inside subteams join the robots into m parts."""
+    label = labels.tolist()
+    if set(label) != set(range(m)):
+        return False
+    if len(label) <= LIST_SEARCH_UP_TO:  # on the lists themselves: the plan's split asks this within a control step
+        return len(set(_parts(_neighbours(len(label), edges), label))) == m
+    return len(np.unique(_subteam_parts(labels, edges))) == m
+
+
+def _most_common(values: list[int], length: int) -> int:
     """np.bincount(values, minlength=length).argmax(): the most frequent value, the smallest of a tie."""
     counts = [0] * max(length, max(values) + 1)
     for v in values:
@@ -103,32 +72,40 @@ def _first_most(values: list[int], length: int) -> int:
     return counts.index(max(counts))
 
 
-def _repair_lists(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
-    """`repair`'s steps, in the same order with the same ties, on plain lists (a test compares the two)."""
-    lab, p, src, dst = labels.tolist(), probs.tolist(), edges[0].tolist(), edges[1].tolist()
-    n = len(lab)
+def repair(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
+    """Make every one of the m subteams non-empty, and each connected in the radius graph where the graph allows.
+
+    Empty subteam j: takes the robot most likely to be in j from the largest subteam. Disconnected subteam: each part
+    but the largest moves to the subteam it shares most edges with (if it touches one). Repeats until nothing changes.
+    Plain lists: a repair moves a few robots at a time, each step a short loop (numpy's per-call cost dominated at
+    ten robots); ties go as argmax takes them, to the first.
+    """
+    n = len(labels)
     m = min(m, n)
+    if connected_subteams(labels, edges, m):  # the common case: nothing to repair
+        return labels.copy()
+    lab, near, p = labels.tolist(), _neighbours(n, edges), probs.tolist()
     for _ in range(4 * n + 4):
         changed = False
         for j in range(m):
             if j not in lab:  # empty: the robot of the largest subteam most likely in j
-                largest = _first_most(lab, m)
+                largest = _most_common(lab, m)
                 donors = [i for i in range(n) if lab[i] == largest]
                 lab[max(donors, key=lambda i: p[i][j])] = j  # max keeps the first of equals, as argmax
                 changed = True
-        inside = [k for k in range(len(src)) if lab[src[k]] == lab[dst[k]]]
-        part = _parts_by_search(n, [src[k] for k in inside], [dst[k] for k in inside])
-        part_size = [0] * n
-        for q in part:
-            part_size[q] += 1
+        part = _parts(near, lab)
+        members: dict[int, list[int]] = {}
+        for i, q in enumerate(part):
+            members.setdefault(q, []).append(i)
         for j in range(m):
             parts = sorted({part[i] for i in range(n) if lab[i] == j})
-            keep = max(parts, key=lambda q: part_size[q])
+            keep = max(parts, key=lambda q: len(members[q]))
             for q in (q for q in parts if q != keep):
-                others = [lab[dst[k]] for k in range(len(src)) if part[src[k]] == q and lab[dst[k]] != j]
+                others = [lab[k] for i in members[q] for k in near[i] if lab[k] != j]
                 if others:  # one move, then the parts are recomputed: they changed
-                    to = _first_most(others, m)
-                    lab = [to if part[i] == q else lab[i] for i in range(n)]
+                    to = _most_common(others, m)
+                    for i in members[q]:
+                        lab[i] = to
                     changed = True
                     break
             if changed:
@@ -136,28 +113,6 @@ def _repair_lists(labels: np.ndarray, probs: np.ndarray, edges: np.ndarray, m: i
         if not changed:
             break
     return np.array(lab, dtype=labels.dtype)
-
-
-def _whole(labels: np.ndarray, edges: np.ndarray, m: int) -> bool:
-    """Every one of the m subteams non-empty and connected: as many parts (`_subteam_parts`) as subteams."""
-    if np.bincount(labels, minlength=m)[:m].min() == 0:
-        return False
-    return int(np.bincount(_subteam_parts(labels, edges), minlength=len(labels)).astype(bool).sum()) == m
-
-
-def connected_subteams(labels: np.ndarray, adj: np.ndarray, m: int) -> bool:
-    """`_whole` on a small team's dense radius graph `adj` (n, n) bool: every one of the m subteams non-empty and
-    connected, i.e. the edges inside subteams join the robots into exactly m parts. Up to 16 robots on plain lists
-    (11 us at ten robots against 18 us for the numpy closure, measured); beyond, `_whole` decides."""
-    n = len(labels)
-    if n > 16:
-        return _whole(labels, np.array(np.nonzero(adj)), m)
-    label, rows = labels.tolist(), adj.tolist()
-    if set(label) != set(range(m)):
-        return False
-    inside = [(i, j) for i in range(n) for j in range(n) if rows[i][j] and label[i] == label[j]]
-    part = _parts_by_search(n, [i for i, _ in inside], [j for _, j in inside])
-    return len(set(part)) == m
 
 
 def hard_assignment(probs: np.ndarray, edges: np.ndarray, m: int) -> np.ndarray:
