@@ -275,6 +275,12 @@ class Geometry:
         return np.array(out)
 
 
+def lengths(v: np.ndarray, keepdims: bool = False) -> np.ndarray:
+    """np.linalg.norm(v, axis=-1): its own sum of squares and root, without its wrapper's call cost (the control
+    step takes several)."""
+    return np.sqrt((v * v).sum(axis=-1, keepdims=keepdims))
+
+
 class PathFrame:
     """Arc-length parametrisation of a polyline path (K, 2): positions, headings, projections. `extend`: the path
     reaches back straight behind its start (arc lengths below 0), so that slots placed behind the start do not all
@@ -319,7 +325,7 @@ class PathFrame:
         t = np.minimum(np.maximum(t, self.seg_from), self.seg_len)
         proj = self.path[None, :-1] + t[..., None] * self.unit[None]
         off = points[:, None] - proj
-        k = np.sqrt((off * off).sum(axis=-1)).argmin(axis=1)  # np.linalg.norm's own sum, without its wrapper
+        k = lengths(off).argmin(axis=1)
         return self.cum[k] + t[np.arange(len(points)), k]
 
     def lateral(self, points: np.ndarray, progress: np.ndarray | None = None) -> np.ndarray:

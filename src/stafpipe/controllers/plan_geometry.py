@@ -11,6 +11,7 @@ import numpy as np
 
 from stafpipe.formations import formation_slots, place
 from stafpipe.geometry import obstacle_distance
+from stafpipe.highlevel.graphs import radius_adjacency
 
 
 def extent(slots: np.ndarray, radius: float) -> tuple[float, float]:
@@ -38,7 +39,7 @@ def separated(
     if bounds is not None:
         out = np.minimum(np.maximum(out, bounds[0]), bounds[1])  # np.clip's values without its call overhead
     for _ in range(rounds):
-        if len(out) <= 32 and not _any_closer(out, distance - 1e-9):  # most steps: no pair to push, no tree
+        if len(out) <= 32 and not radius_adjacency(out, distance - 1e-9).any():  # most steps: no pair, no tree
             break
         pairs = cKDTree(out).query_pairs(distance - 1e-9, output_type="ndarray")
         if len(pairs) == 0:
@@ -53,14 +54,6 @@ def separated(
         if bounds is not None:
             out = np.minimum(np.maximum(out, bounds[0]), bounds[1])
     return out
-
-
-def _any_closer(points: np.ndarray, distance: float) -> bool:
-    """Whether two of a few points are within `distance` (the k-d tree's pair test, on all n^2 pairs at once)."""
-    gap = points[:, None, :] - points[None, :, :]
-    square = (gap * gap).sum(axis=-1)
-    np.fill_diagonal(square, np.inf)
-    return bool(square.min() <= distance * distance)
 
 
 def members(labels: np.ndarray) -> list[np.ndarray]:

@@ -29,7 +29,7 @@ from stafpipe.controllers.plan_geometry import (
     separated,
 )
 from stafpipe.formations import assign_slots, place
-from stafpipe.geometry import PathFrame, obstacle_distance
+from stafpipe.geometry import PathFrame, lengths, obstacle_distance
 
 
 class StafPlan:
@@ -144,7 +144,7 @@ class StafPlan:
         own (the path keeps clear of obstacles, so the robot goes round the wall along it). A robot sliding round a
         bollard sees its target again sooner, and keeps it."""
         way = targets - pos
-        length = np.sqrt((way * way).sum(axis=1))  # np.linalg.norm's own sum and root, without its wrapper
+        length = lengths(way)
         # a way inside the robot's free disc is in sight; the others are checked point by point (two grid cells of
         # margin: the grid's nearest-cell error at both ends, so the result is the same as checking all)
         blocked = self.geometry.clearance(pos) < length + SIGHT_STEP / 2 + 2 * self.geometry.resolution

@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from stafpipe.geometry import point_ahead
+from stafpipe.geometry import lengths, point_ahead
 from stafpipe.sensing import Observation
 
 OWN, EDGE = 7, 5
@@ -27,12 +27,6 @@ class Features(NamedTuple):
     """(.., n, n, 5) [i, j]: what i knows of neighbour j."""
     mask: np.ndarray
     """(.., n, n) bool: j is i's neighbour."""
-
-
-def _norm(v: np.ndarray) -> np.ndarray:
-    """(.., 1) lengths of vectors v (.., 2): np.linalg.norm's own sum of squares and root, without its call overhead
-    (the features are built at every control step)."""
-    return np.sqrt((v * v).sum(axis=-1, keepdims=True))
 
 
 def to_robot_frame(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -111,9 +105,9 @@ def staf_features(
     own entry per robot, 1 where its world's robots have a differential drive."""
     c, s = np.cos(obs.heading), np.sin(obs.heading)
     to_target = target - obs.position
-    dist = _norm(to_target)
+    dist = lengths(to_target, keepdims=True)
     clipped = to_target * np.minimum(1.0, goal_clip / np.maximum(dist, 1e-9))
-    length = _norm(obs.obstacle)
+    length = lengths(obs.obstacle, keepdims=True)
     obstacle = obs.obstacle * np.minimum(1.0, sensing_radius / np.maximum(length, 1e-9))  # seen at most at the radius
     own = to_robot_frames([clipped, obs.velocity, obstacle], c, s)
     if drive_flag is not None:
