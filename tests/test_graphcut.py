@@ -238,7 +238,8 @@ def test_subteam_parts_and_connectivity_agree_with_scipy() -> None:
     answers = set()
     for labels, edges, m in _random_teams(11, (2, 9, 16, 40, 64, 65, 90), 200):
         parts, reference = _subteam_parts(labels, edges), _scipy_parts(labels, edges)
-        assert len(set(zip(parts.tolist(), reference.tolist(), strict=True))) == len(set(reference.tolist()))
+        pairs = set(zip(parts.tolist(), reference.tolist(), strict=True))  # one part for one component, and back
+        assert len(pairs) == len(set(reference.tolist())) == len(set(parts.tolist()))
         if len(labels) <= 64:
             assert all(parts[i] == np.flatnonzero(reference == reference[i]).min() for i in range(len(labels)))
         whole = set(labels.tolist()) == set(range(m)) and len(set(reference.tolist())) == m
