@@ -7,7 +7,6 @@ so no padding or masks are needed and a team's result does not depend on the oth
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
@@ -78,23 +77,24 @@ def radius_adjacency(pos: np.ndarray, radius: float) -> np.ndarray:
 
 
 def node_features(team: Team, features: Sequence[str]) -> np.ndarray:
-    """(n, F) node features of one team, in the order `features` names them (see NODE_FEATURES)."""
-    centre, goal_centre = team.pos.sum(axis=0) / team.n, team.goal.sum(axis=0) / team.n  # np.mean's own sums
-    out = np.empty((team.n, 2 * len(features)), dtype=np.result_type(team.pos, team.goal))  # filled column pairs
-    for k, name in enumerate(features):
-        col = out[:, 2 * k : 2 * k + 2]
+    """(n, F) node features of one team, in the order `features` names them (see NODE_FEATURES). Columns built apart
+    and concatenated: filling one array in place gave the same values but moved where later arrays lie in memory, and
+    the graph cut's training then rounded differently (docs/reproduction.md, the report of 2026-12-04)."""
+    centre, goal_centre = team.pos.mean(axis=0), team.goal.mean(axis=0)
+    cols = []
+    for name in features:
         if name == "pos":
-            col[:] = team.pos - centre
+            cols.append(team.pos - centre)
         elif name == "goal":
-            col[:] = team.goal - goal_centre
+            cols.append(team.goal - goal_centre)
         elif name == "heading":
             d = goal_centre - centre
-            col[:] = d / max(math.sqrt(d @ d), 1e-9)  # np.linalg.norm of a vector is this root of its dot product
+            cols.append(np.broadcast_to(d / max(float(np.linalg.norm(d)), 1e-9), team.pos.shape))
         elif name == "vel":
-            col[:] = team.vel if team.vel is not None else 0.0
+            cols.append(team.vel if team.vel is not None else np.zeros_like(team.pos))
         else:
             raise ValueError(f"unknown node feature {name!r}; known: {list(NODE_FEATURES)}")
-    return out
+    return np.concatenate(cols, axis=1)
 
 
 class TeamGraph(NamedTuple):
