@@ -302,8 +302,6 @@ class PathFrame:
         self.seg_from = np.zeros(len(self.seg_len))
         if extend:
             self.seg_from[0] = -np.inf
-        # np.minimum/np.maximum below, not np.clip: the same values at a fraction of the call's cost (the plan calls
-        # these several times per control step: benchmarks/staf_decision_time.py)
 
     def at(self, s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points (.., 2) and headings (..) at arc lengths s (clipped to the path, or only at its end if extended)."""
@@ -313,6 +311,8 @@ class PathFrame:
             along = one - self._cum[i]
             (px, py), (ux, uy) = self._points[i], self._units[i]
             return np.array([px + along * ux, py + along * uy]), self.heading[i]
+        # np.minimum/np.maximum, not np.clip: the same values at a fraction of the call's cost (the plan calls `at`
+        # and `progress` several times per control step: benchmarks/staf_decision_time.py)
         s = np.asarray(s, float)
         s = np.minimum(s if self.extend else np.maximum(s, 0.0), self.length)
         k = np.minimum(np.maximum(np.searchsorted(self.cum, s, side="right") - 1, 0), len(self.seg_len) - 1)
