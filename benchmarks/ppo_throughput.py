@@ -33,35 +33,40 @@ def main() -> None:
     device = training_device(args.device, "--device")
     torch.set_num_threads(2)
     torch.manual_seed(0)
-    corridor = load_named_scenario("corridor")
-    path, eta = path_and_width(corridor)
     print(f"update device: {device}; rollouts on the cpu, {torch.get_num_threads()} threads")
     print(
         f"{'worlds':>6} | {'rollout robot-steps/s':>21} | {'update us / sample':>18} | "
         f"{'plain torch us / sample':>23} | {'ratio':>5} | {'overall robot-steps/s':>21}"
     )
     print("-" * 112)
+    measure(4, 10, device)  # unprinted: the first update on a GPU pays for CUDA's start (234 us a sample at 4 worlds)
     for b in (4, 16, 64):
-        tc = TrainPPOConfig(worlds=b, episode_steps=args.steps)
-        policy = DGNNPolicy(PolicyConfig())
-        opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
-        worlds = Worlds([corridor] * b, SensingConfig())
-        obs = worlds.reset(list(range(b)))
-        adapter = ADAPTERS["dgnn"](tc.policy, tc.reward, None, 2.0)
-        adapter.begin(teams_of([(corridor, path, eta)] * b, worlds))
-        start = time.perf_counter()
-        ro, _ = collect(policy, adapter, worlds, obs, tc, 0.3)
-        rollout = time.perf_counter() - start
-        adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
-        start = time.perf_counter()
-        update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0), device)
-        upd = time.perf_counter() - start
-        samples = ro.rewards.numel()
-        ref = plain_update(policy, ro, tc, device)
+        samples, rollout, upd, ref = measure(b, args.steps, device)
         print(
             f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {1e6 * ref / samples:>23.1f} | "
             f"{upd / ref:>5.2f} | {samples / (rollout + upd):>21,.0f}"
         )
+
+
+def measure(b: int, steps: int, device: torch.device) -> tuple[int, float, float, float]:
+    """(robot-steps, rollout s, PPO update s, plain-torch update s) of one iteration of b corridor worlds."""
+    corridor = load_named_scenario("corridor")
+    path, eta = path_and_width(corridor)
+    tc = TrainPPOConfig(worlds=b, episode_steps=steps)
+    policy = DGNNPolicy(PolicyConfig())
+    opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
+    worlds = Worlds([corridor] * b, SensingConfig())
+    obs = worlds.reset(list(range(b)))
+    adapter = ADAPTERS["dgnn"](tc.policy, tc.reward, None, 2.0)
+    adapter.begin(teams_of([(corridor, path, eta)] * b, worlds))
+    start = time.perf_counter()
+    ro, _ = collect(policy, adapter, worlds, obs, tc, 0.3)
+    rollout = time.perf_counter() - start
+    adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
+    start = time.perf_counter()
+    update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0), device)
+    upd = time.perf_counter() - start
+    return ro.rewards.numel(), rollout, upd, plain_update(policy, ro, tc, device)
 
 
 def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig, device: torch.device) -> float:

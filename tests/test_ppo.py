@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 import stafpipe.learning.ppo as ppo
 from conftest import job_dirs, tensorboard_scalars
 from stafpipe.cli import app
+from stafpipe.errors import StafpipeError
 from stafpipe.launch import launch
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
@@ -352,3 +353,29 @@ def test_drive_input_and_direction_weight_are_checked() -> None:
     for gap in (-0.01, 0.35):  # below zero, or where the cap starts braking: never moves
         with pytest.raises(StafpipeError, match=r"train_ppo.imitation.stop_gap"):
             TrainPPOConfig(imitation=ImitationConfig(stop_gap=gap)).check()
+
+
+def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error() -> None:
+    """The update reads its losses once, after its minibatches (not at each, which waits for a GPU); a NaN there
+    stops training rather than saving NaN weights."""
+    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.dgnn import DGNNPolicy
+    from stafpipe.learning.rollout import collect
+    from stafpipe.world import Worlds
+
+    torch.manual_seed(0)
+    corridor = load_named_scenario("corridor")
+    tc = TrainPPOConfig(worlds=2, episode_steps=6, policy=PolicyConfig(hidden=16), minibatches=2, epochs=1)
+    policy = DGNNPolicy(tc.policy)
+    worlds = Worlds([corridor] * 2, SensingConfig())
+    obs = worlds.reset([0, 1])
+    adapter = ADAPTERS["dgnn"](tc.policy, tc.reward, None, 2.0)
+    adapter.begin(ppo.teams_of([(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)] * 2, worlds))
+    ro, _ = collect(policy, adapter, worlds, obs, tc, 0.3)
+    adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
+    opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
+    stats = ppo.update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))
+    assert all(math.isfinite(v) for v in stats.values()) and set(stats) >= {"losses/policy", "losses/clipfrac"}
+    ret[0, 0, 0] = float("nan")
+    with pytest.raises(StafpipeError, match="train_ppo: the PPO update's losses are not finite"):
+        ppo.update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))

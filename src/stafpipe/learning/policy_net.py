@@ -30,5 +30,7 @@ class PolicyNet(nn.Module):
     def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         raise NotImplementedError
 
-    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
-        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
+    def distribution(self, mean: torch.Tensor, validate: bool = True) -> torch.distributions.Normal:
+        """`validate` false skips torch's argument checks (a NaN mean): each check waits for a GPU, so the update,
+        which checks its losses itself, leaves them out."""
+        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean), validate_args=validate)

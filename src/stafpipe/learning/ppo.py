@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import logging
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -72,20 +73,16 @@ def update(
     b_own, b_edge, b_mask, b_act = flat(ro.own), flat(ro.edge), flat(ro.mask), flat(ro.actions)
     b_logp, b_adv, b_ret = flat(ro.logprobs), flat(adv), flat(ret)
     size = t * b // tc.minibatches
-    out = {
-        "losses/policy": 0.0,
-        "losses/value": 0.0,
-        "losses/entropy": 0.0,
-        "losses/approx_kl": 0.0,
-        "losses/clipfrac": 0.0,
-    }
-    count = 0
+    # each minibatch's statistics stay on the device until the end: reading one (float()) waits for the device, and
+    # on a GPU that wait at every minibatch was most of the update's excess over the network's own cost
+    # (benchmarks/ppo_throughput.py)
+    stats: list[torch.Tensor] = []
     for _ in range(tc.epochs):
-        order = torch.randperm(t * b, generator=gen)
+        order = torch.randperm(t * b, generator=gen).to(b_own.device)
         for k in range(tc.minibatches):
-            mb = order[k * size : (k + 1) * size].to(b_own.device)
+            mb = order[k * size : (k + 1) * size]
             mean, value = policy(b_own[mb], b_edge[mb], b_mask[mb])
-            dist = policy.distribution(mean)
+            dist = policy.distribution(mean, validate=False)
             logp = dist.log_prob(b_act[mb]).sum(-1)
             ratio = (logp - b_logp[mb]).exp()
             mb_adv = (b_adv[mb] - b_adv[mb].mean()) / (b_adv[mb].std() + 1e-8)
@@ -99,13 +96,17 @@ def update(
             torch.nn.utils.clip_grad_norm_(policy.parameters(), tc.max_grad_norm)
             opt.step()
             with torch.no_grad():
-                out["losses/approx_kl"] += float(((ratio - 1) - (logp - b_logp[mb])).mean())
-                out["losses/clipfrac"] += float(((ratio - 1).abs() > tc.clip).float().mean())
-            out["losses/policy"] += float(pg_loss.detach())
-            out["losses/value"] += float(v_loss.detach())
-            out["losses/entropy"] += float(entropy.detach())
-            count += 1
-    return {k: v / count for k, v in out.items()}
+                kl = ((ratio - 1) - (logp - b_logp[mb])).mean()
+                clipfrac = ((ratio - 1).abs() > tc.clip).float().mean()
+                stats.append(torch.stack([pg_loss, v_loss, entropy, kl, clipfrac]).detach())
+    rows = torch.stack(stats).cpu().tolist()  # one read; summed in order, as Python floats, minibatch by minibatch
+    names = ("losses/policy", "losses/value", "losses/entropy", "losses/approx_kl", "losses/clipfrac")
+    if not all(math.isfinite(v) for row in rows for v in row):
+        raise StafpipeError(
+            "train_ppo: the PPO update's losses are not finite (NaN or inf): training diverged; a lower "
+            "train_ppo.lr or train_ppo.max_grad_norm may help"
+        )
+    return {name: sum((row[c] for row in rows), 0.0) / len(rows) for c, name in enumerate(names)}
 
 
 Drawn = tuple[Scenario, np.ndarray, float]
