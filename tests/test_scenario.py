@@ -172,3 +172,11 @@ def test_malformed_scenario_through_the_cli_exits_2_and_leaves_nothing(workdir, 
     assert launch("eval", [f"scenario.path={bad}"]) == 2
     assert "robot.drive" in capsys.readouterr().err
     assert not list(workdir.rglob("results.parquet")) and not list(workdir.rglob("*.mcap"))
+
+
+def test_a_folder_of_maps_given_as_the_scenario_is_named_a_folder(tmp_path) -> None:
+    (tmp_path / "maps").mkdir()
+    with pytest.raises(ScenarioError, match=r"maps is a directory; name one scenario YAML in it"):
+        load_scenario_file(tmp_path / "maps")
+    with pytest.raises(ScenarioError, match=r"gone.yaml does not exist"):
+        load_scenario_file(tmp_path / "gone.yaml")
