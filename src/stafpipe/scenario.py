@@ -329,10 +329,9 @@ def _required_sections(raw: Any, path: Path) -> None:
 def load_scenario_file(path: str | Path) -> ScenarioConfig:
     """Read a scenario YAML file into a typed ScenarioConfig; errors name the file and the field."""
     path = Path(path)
-    if path.is_dir():  # a generate-maps output folder, say: one run evaluates one map
+    if path.is_dir():  # a generate-maps output folder, say: a scenario is one file
         raise ScenarioError(
-            f"scenario file {path} is a directory; name one scenario YAML in it (e.g. {path / 'map_0000.yaml'}), "
-            "one eval run per map"
+            f"scenario file {path} is a directory; name one scenario YAML in it (e.g. {path / 'map_0000.yaml'})"
         )
     if not path.is_file():
         raise ScenarioError(f"scenario file {path} does not exist")
