@@ -63,3 +63,20 @@ def test_bad_formation_arguments() -> None:
         formation_slots("circle", 1, 1.0)
     with pytest.raises(ValueError, match="spacing"):
         formation_slots("line", 3, 0.0)
+
+
+def test_assignment_costs_are_cdists_to_the_bit() -> None:
+    """assign_slots sums dx^2 + dy^2 itself (the split's time budget): the same robot-to-slot choice as scipy's
+    "sqeuclidean" cdist gives to the Hungarian method, for spread-out, crowded and tied teams."""
+    from scipy.optimize import linear_sum_assignment
+    from scipy.spatial.distance import cdist
+
+    rng = np.random.default_rng(3)
+    for k in range(300):
+        n = int(rng.integers(1, 14))
+        robots = rng.normal(0.0, rng.uniform(0.01, 50.0), (n, 2)) + rng.uniform(-500, 500, 2)
+        slots = robots[rng.permutation(n)] + rng.normal(0.0, rng.uniform(0.0, 3.0), (n, 2)) * (k % 10 != 0)
+        rows, cols = linear_sum_assignment(cdist(robots, slots, "sqeuclidean"))
+        expected = np.empty(n, dtype=int)
+        expected[rows] = cols
+        assert np.array_equal(assign_slots(robots, slots), expected)

@@ -206,6 +206,24 @@ def test_the_plans_divider_decides_as_divide_does() -> None:
                 assert np.array_equal(decide(pos, goal, m), expected), (kind, n, m)
 
 
+def test_the_plans_cut_features_are_node_features_to_the_bit() -> None:
+    """The plan's split builds the cut's node features itself (highlevel/infer.py, `small_team_features`): the very
+    bits of `node_features`, for every feature order the config allows, teams of one robot and goals on the team."""
+    from stafpipe.highlevel.graphs import node_features
+    from stafpipe.highlevel.infer import small_team_features
+
+    rng = np.random.default_rng(11)
+    for k in range(400):
+        n = int(rng.integers(1, 16))
+        pos = rng.normal(0.0, rng.uniform(0.1, 40.0), (n, 2)) + rng.uniform(-300, 300, 2)
+        goal = pos + rng.normal(0.0, 30.0, 2) * (k % 25 != 0)  # some goals on the team: a zero heading
+        names = [["pos", "goal", "heading"], ["heading", "pos"], ["goal"], ["pos", "goal", "heading", "vel"]][k % 4]
+        team = Team(pos, goal, 2)
+        assert np.array_equal(
+            small_team_features(team, names).view(np.uint64), node_features(team, names).view(np.uint64)
+        )
+
+
 def _scipy_parts(labels: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """Reference: scipy's components of the graph of edges inside subteams."""
     from scipy.sparse import coo_matrix

@@ -15,7 +15,7 @@ from omegaconf import OmegaConf
 
 from staf_plans import ideal_run, scenario_with, start_and_plan
 from stafpipe.controllers.plan_config import PlanConfig
-from stafpipe.controllers.plan_geometry import blocked_ways
+from stafpipe.controllers.plan_geometry import blocked_ways, members
 from stafpipe.controllers.staf_plan import StafPlan
 from stafpipe.highlevel.infer import divider
 from stafpipe.integrity import formation_integrity
@@ -507,3 +507,15 @@ def test_the_extended_path_reaches_back_behind_its_start() -> None:
     assert points == pytest.approx(np.array([[-1.5, 0.0], [-0.5, 0.0], [2.0, 0.0], [4.0, 3.0]]))
     assert clipped.at(np.array([-1.5, -0.5]))[0] == pytest.approx(np.zeros((2, 2)))
     assert extended.lateral(behind[:2]) == pytest.approx([0.5, -0.5])
+
+
+def test_members_lists_each_present_subteam_in_label_order() -> None:
+    """`members` (the split's subteams): each label present, in label order, its robots in index order; absent labels
+    are skipped; the same arrays as a scan per label."""
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        labels = rng.integers(0, int(rng.integers(1, 6)), int(rng.integers(1, 14)))
+        expected = [np.flatnonzero(labels == j) for j in range(labels.max() + 1) if (labels == j).any()]
+        got = members(labels)
+        assert len(got) == len(expected)
+        assert all(a.dtype == b.dtype and np.array_equal(a, b) for a, b in zip(got, expected, strict=True))

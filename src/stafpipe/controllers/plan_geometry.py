@@ -9,7 +9,7 @@ from itertools import permutations
 
 import numpy as np
 
-from stafpipe.formations import formation_slots, place
+from stafpipe.formations import formation_slots, rotation
 from stafpipe.geometry import obstacle_distance
 from stafpipe.highlevel.graphs import radius_adjacency
 
@@ -57,10 +57,12 @@ def separated(
 
 
 def members(labels: np.ndarray) -> list[np.ndarray]:
-    """The robots (index order) of each subteam present in `labels`, in label order: one sort, not a scan per label."""
-    by_label = np.argsort(labels, kind="stable")
-    ends = np.cumsum(np.bincount(labels)).tolist()
-    return [by_label[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True) if b > a]
+    """The robots (index order) of each subteam present in `labels`, in label order: one pass over a plain list (a
+    handful of robots, split within a control step: numpy's per-call cost dominated a sort and counts)."""
+    by_label: dict[int, list[int]] = {}
+    for robot, label in enumerate(labels.tolist()):
+        by_label.setdefault(label, []).append(robot)
+    return [np.array(by_label[label], dtype=np.intp) for label in sorted(by_label)]
 
 
 @functools.lru_cache(maxsize=256)
@@ -117,7 +119,7 @@ def blocked_ways(progress: np.ndarray, lateral: np.ndarray, order: list[np.ndarr
     moves on while the later ones wait where they are, so such a robot is met head-on."""
     count = 0
     for j in range(len(order) - 1):
-        ahead, later = order[j], np.concatenate(order[j + 1 :])
+        ahead, later = order[j], order[-1] if j + 2 == len(order) else np.concatenate(order[j + 1 :])
         in_front = progress[later][None, :] - progress[ahead][:, None] > radius
         in_lane = np.abs(lateral[later][None, :] - lateral[ahead][:, None]) < 2 * radius + LANE_MARGIN
         count += int((in_front & in_lane).sum())
@@ -167,8 +169,8 @@ def travel_frame(pos: np.ndarray, goal: np.ndarray) -> tuple[np.ndarray, np.ndar
     Sec. 3: p_i, g_i, q_i) and the network, trained on every heading, is not exactly equivariant; in this frame its
     subteams do not depend on which way the map points (docs/decisions.md, "The cut in the team's travel frame")."""
     d = goal.sum(axis=0) / len(goal) - pos.sum(axis=0) / len(pos)  # the centres (np.mean's sums and divisions)
-    back = -float(np.arctan2(d[1], d[0]))
-    return place(pos, (0.0, 0.0), back), place(goal, (0.0, 0.0), back)
+    turn = rotation(-float(np.arctan2(d[1], d[0]))).T
+    return pos @ turn + 0.0, goal @ turn + 0.0  # `place` about the origin: one rotation for both (+ 0.0 as its centre)
 
 
 def short_of(samples: np.ndarray, clear: np.ndarray, gap: float) -> np.ndarray:

@@ -120,6 +120,8 @@ class StafPlan:
         self.home_rate = np.zeros(self.n)
         self.homing = np.zeros(self.n, dtype=bool)
         self.limits: dict[int, float] = {}  # _short_of_taken of the current step, per subteam
+        self.weights: dict[tuple[int, float], float] = {}  # _file_weight of the current step, per subteam and anchor
+        self.forms: dict[tuple[int, float], float] = {}  # formation depth per subteam and spacing (`_depth`)
         # the way into the subteams at the split: targets slide from where the robots were to their new slots
         self.split_from: np.ndarray | None = None
         self.split_frac, self.split_rate = 1.0, 0.0
@@ -170,7 +172,7 @@ class StafPlan:
         return out
 
     def _step(self, pos: np.ndarray, dt: float) -> np.ndarray:
-        self.limits = {}
+        self.limits, self.weights = {}, {}
         if self.regrouped:
             return self._home(dt)
         progress = self.frame.progress(pos)
@@ -245,6 +247,7 @@ class StafPlan:
         for j, idx in enumerate(self.order):
             self.labels[idx] = j
         self.anchor = np.array(anchors)
+        self.weights, self.forms = {}, {}  # of the subteams before the split
         # later subteams wait where they are, in their own formation (the subteam's type, facing along the path)
         self.hold = [None] + [self._formed(j, pos) for j in range(1, len(self.order))]
         self.split_from, self.split_frac, self.split_rate = pos.copy(), 0.0, 0.0
@@ -435,7 +438,9 @@ class StafPlan:
 
     def _depth(self, j: int, spacing: float) -> float:
         """Depth of subteam j along the path: its formation's, lengthened where it turns into a column."""
-        form = extent(self.slots[j] * spacing, self.radius)[0]
+        form = self.forms.get((j, spacing))
+        if form is None:  # the subteam's slots only change order after the split (`_follow_order`): the same extent
+            form = self.forms[(j, spacing)] = extent(self.slots[j] * spacing, self.radius)[0]
         column = (len(self.order[j]) - 1) * self.spacing + 2 * self.radius
         weight = self._file_weight(j)
         return (1 - weight) * form + weight * max(form, column)
@@ -472,12 +477,17 @@ class StafPlan:
                 self.ranks[j] = rank
 
     def _file_weight(self, j: int) -> float:
-        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column."""
-        half = (len(self.order[j]) - 1) / 2 * self.spacing
-        lo = int(max(0.0, self.anchor[j] - half) / self.ds)
-        hi = int(max(0.0, self.anchor[j] + half) / self.ds) + 1
-        window = self.file_weights[j][lo:hi]
-        return float(np.maximum.reduce(window)) if len(window) else 0.0
+        """How far subteam j is turned into a column (0..1): the largest single-file weight along its column. Kept
+        for the step (`weights`): the plan asks it several times per step, mostly at the same anchor."""
+        anchor = float(self.anchor[j])
+        weight = self.weights.get((j, anchor))
+        if weight is None:
+            half = (len(self.order[j]) - 1) / 2 * self.spacing
+            lo = int(max(0.0, anchor - half) / self.ds)
+            hi = int(max(0.0, anchor + half) / self.ds) + 1
+            window = self.file_weights[j][lo:hi]
+            weight = self.weights[(j, anchor)] = float(np.maximum.reduce(window)) if len(window) else 0.0
+        return weight
 
     @property
     def same(self) -> np.ndarray:

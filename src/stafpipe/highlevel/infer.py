@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -63,6 +64,28 @@ def subteams_wanted(
     return m
 
 
+def small_team_features(team: Team, features: Sequence[str]) -> np.ndarray:
+    """`node_features(team, features)`, the same values (a test), for the plan's split: the same sums, divisions and
+    square root without numpy's wrappers (np.mean's sum and division, np.linalg.norm's dot product and root), written
+    into one array rather than concatenated. Training keeps `node_features` itself: its arrays' places in memory are
+    part of the graph cut's recorded rounding (graphs.py)."""
+    if any(name not in ("pos", "goal", "heading") for name in features):
+        return node_features(team, features)
+    n = len(team.pos)
+    centre, goal_centre = team.pos.sum(axis=0) / n, team.goal.sum(axis=0) / n
+    d = goal_centre - centre
+    x = np.empty((n, 2 * len(features)))
+    for k, name in enumerate(features):
+        col = x[:, 2 * k : 2 * k + 2]
+        if name == "heading":
+            col[:] = d / max(math.sqrt(float(d.dot(d))), 1e-9)
+        elif name == "pos":
+            np.subtract(team.pos, centre, out=col)
+        else:
+            np.subtract(team.goal, goal_centre, out=col)
+    return x
+
+
 def divider(checkpoint: str = ""):
     """`divide(pos, goal, m) -> labels` with the deep graph cut of `checkpoint` (empty: the shipped one), for STAF's
     plan (controllers/staf_plan.py)."""
@@ -79,7 +102,8 @@ def divider(checkpoint: str = ""):
         # decision-time budget (benchmarks/staf_decision_time.py); a test checks both give the same labels
         adj = radius_adjacency(team.pos, model.cfg.radius)
         m = min(m, model.cfg.m_max)
-        logits = fast.logits(node_features(team, model.cfg.features), np.zeros((2, 0), dtype=np.int64), m, adj=adj)
+        x = small_team_features(team, model.cfg.features)
+        logits = fast.logits(x, np.zeros((2, 0), dtype=np.int64), m, adj=adj)
         labels, edges = logits[:, :m].argmax(axis=1), np.array(np.nonzero(adj))  # Y's argmax: softmax keeps order
         if connected_subteams(labels, edges, m):  # nothing for `repair` to change: no Y needed
             return labels

@@ -127,7 +127,9 @@ class NumpyGraphCut:
         if adj is None:
             adj = np.zeros((n, n), dtype=bool)
             adj[edges[1], edges[0]] = True
-        lonely = not adj.any(axis=1).all()  # a robot with no neighbour: its sum over neighbours is 0
+        # ufuncs' reduce in place of the array methods: the same values without the methods' wrappers (the plan's
+        # split calls this within a control step: benchmarks/staf_decision_time.py)
+        lonely = not np.logical_or.reduce(adj, axis=1).all()  # a robot with no neighbour: its sum over neighbours is 0
         mask = np.where(adj, 0.0, -np.inf)
         split = heads * width
         h = x
@@ -139,16 +141,16 @@ class NumpyGraphCut:
             scores = z[:, split : split + heads].T[:, :, None] + z[:, split + heads :].T[:, None, :]  # (H, i, j)
             np.maximum(scores, 0.0 if self.cfg.attention == "relu" else 0.2 * scores, out=scores)
             scores += mask
-            peak = scores.max(axis=2, keepdims=True)
+            peak = np.maximum.reduce(scores, axis=2, keepdims=True)
             if lonely:
                 peak = np.where(np.isfinite(peak), peak, 0.0)
             scores -= peak
             alpha = np.exp(scores, out=scores)
-            total = alpha.sum(axis=2, keepdims=True)
+            total = np.add.reduce(alpha, axis=2, keepdims=True)
             alpha /= np.maximum(total, 1e-300) if lonely else total
             agg = alpha @ wh
             agg += wh
-            h = agg.sum(axis=0)  # H x the heads' mean: 1/H is in the next weights
+            h = np.add.reduce(agg, axis=0)  # H x the heads' mean: 1/H is in the next weights
             if k + 1 < len(self.layers):
                 np.maximum(h, 0.0, out=h)
         w1, b1 = self.tau_out
