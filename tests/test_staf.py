@@ -15,7 +15,7 @@ from omegaconf import OmegaConf
 
 from staf_plans import ideal_run, scenario_with, start_and_plan
 from stafpipe.controllers.plan_config import PlanConfig
-from stafpipe.controllers.plan_geometry import blocked_ways, members
+from stafpipe.controllers.plan_geometry import blocked_ways, column_weight, members
 from stafpipe.controllers.staf_plan import StafPlan
 from stafpipe.highlevel.infer import divider
 from stafpipe.integrity import formation_integrity
@@ -519,3 +519,11 @@ def test_members_lists_each_present_subteam_in_label_order() -> None:
         got = members(labels)
         assert len(got) == len(expected)
         assert all(a.dtype == b.dtype and np.array_equal(a, b) for a, b in zip(got, expected, strict=True))
+
+
+def test_column_weight_is_the_largest_weight_under_the_column():
+    weights = np.array([0.0, 0.5, 1.0, 0.2])
+    assert column_weight(weights, anchor=1.5, half=0.5, ds=1.0) == 1.0  # samples 1 and 2
+    assert column_weight(weights, anchor=3.0, half=0.0, ds=1.0) == 0.2  # the last sample alone
+    assert column_weight(weights, anchor=9.0, half=1.0, ds=1.0) == 0.0  # past the samples
+    assert column_weight(weights, anchor=0.2, half=2.0, ds=1.0) == 1.0  # clipped at the path's start

@@ -143,6 +143,13 @@ def column_rank(slots: np.ndarray) -> np.ndarray:
     return rank
 
 
+def column_weight(file_weights: np.ndarray, anchor: float, half: float, ds: float) -> float:
+    """The largest single-file weight (`file_weights`, sampled every `ds` along the path) over a column of half-length
+    `half` centred on arc length `anchor`; 0 where the column lies past the samples."""
+    window = file_weights[int(max(0.0, anchor - half) / ds) : int(max(0.0, anchor + half) / ds) + 1]
+    return float(np.maximum.reduce(window)) if len(window) else 0.0
+
+
 def follow_order(rank: np.ndarray, progress: np.ndarray, margin: float, until: float = np.inf) -> np.ndarray:
     """`rank` (k,) with each pair of neighbours in the column swapped while the one placed behind stands more than
     `margin` ahead of the other along the path (`progress` (k,)) and the other has not yet come to `until` (the end

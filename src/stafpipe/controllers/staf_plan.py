@@ -21,13 +21,7 @@ import numpy as np
 
 from stafpipe.controllers import plan_geometry as geo
 from stafpipe.controllers.plan_config import SIGHT_REACH, SIGHT_STEP, WAY_CLEARANCE, PlanConfig
-from stafpipe.controllers.plan_geometry import (
-    column_rank,
-    extent,
-    follow_order,
-    lateral_clearance,
-    separated,
-)
+from stafpipe.controllers.plan_geometry import column_rank, extent
 from stafpipe.formations import assign_slots, place
 from stafpipe.geometry import PathFrame, lengths, obstacle_distance
 
@@ -68,7 +62,7 @@ class StafPlan:
 
         key = ("lateral_clearance", points.tobytes(), heading.tobytes())  # the same path every episode: once
         self.geometry = Geometry.of(scenario)
-        self.clear = self.geometry.remember(key, lambda: lateral_clearance(points, heading, scenario))
+        self.clear = self.geometry.remember(key, lambda: geo.lateral_clearance(points, heading, scenario))
         self.full_slots = np.asarray(template, float)
         _, full_width = extent(self.full_slots, self.radius)
         narrow = 2 * (self.clear - cfg.margin) < full_width
@@ -133,7 +127,7 @@ class StafPlan:
         targets = self._step(pos, dt)
         if self.cfg.target_gap > 0:
             inside = self.bounds if self.cfg.in_world and self.cfg.separate_in_world else None
-            targets = separated(targets, 2 * self.radius + self.cfg.target_gap, bounds=inside)
+            targets = geo.separated(targets, 2 * self.radius + self.cfg.target_gap, bounds=inside)
         if self.cfg.in_sight:
             targets = self._in_sight(pos, targets, dt)
         if self.cfg.in_world:  # np.clip's values without its call overhead (a cost of every control step)
@@ -470,7 +464,7 @@ class StafPlan:
             if self.hold[j] is not None or self._file_weight(j) < 1.0:
                 continue
             whole = np.flatnonzero(self.file_weights[j] >= 1.0)  # where it is a column
-            rank = follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds)
+            rank = geo.follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds)
             if (rank != self.ranks[j]).any():
                 by_place = np.argsort(self.ranks[j])  # the robot (row) at each place before
                 self.slots[j] = self.slots[j][by_place[rank]]
@@ -480,14 +474,10 @@ class StafPlan:
         """How far subteam j is turned into a column (0..1): the largest single-file weight along its column. Kept
         for the step (`weights`): the plan asks it several times per step, mostly at the same anchor."""
         anchor = float(self.anchor[j])
-        weight = self.weights.get((j, anchor))
-        if weight is None:
+        if (j, anchor) not in self.weights:
             half = (len(self.order[j]) - 1) / 2 * self.spacing
-            lo = int(max(0.0, anchor - half) / self.ds)
-            hi = int(max(0.0, anchor + half) / self.ds) + 1
-            window = self.file_weights[j][lo:hi]
-            weight = self.weights[(j, anchor)] = float(np.maximum.reduce(window)) if len(window) else 0.0
-        return weight
+            self.weights[(j, anchor)] = geo.column_weight(self.file_weights[j], anchor, half, self.ds)
+        return self.weights[(j, anchor)]
 
     @property
     def same(self) -> np.ndarray:
