@@ -1,6 +1,7 @@
 """Decision time of STAF for one control step (plan + deep graph cut when it splits + intermediate GNN + policy).
 
 Usage: python benchmarks/staf_decision_time.py [--repeats 30] [--episodes 40] [--maps corridor doorway ...]
+       [--ensemble B.pt C.pt]  (the 10-robot rows with `method.ensemble`: one forward pass more per member)
 Targets (STAF issue): 10 robots <= 1 ms per step, 1,000 robots <= 50 ms. One torch thread, the shipped policy and
 deep graph cut. 10 robots: `method=staf`'s own act() on the corridor (dense features from the harness' observation),
 timed per step over whole episodes; the split step (which runs the cut) is reported apart. 1,000 robots: a 40 x 25
@@ -32,13 +33,13 @@ from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 
-def ten_robots(episodes: int, name: str = "corridor") -> tuple[float, float, float]:
+def ten_robots(episodes: int, name: str = "corridor", ensemble: list[str] | None = None) -> tuple[float, float, float]:
     """(median ms per step, 99th percentile ms per step, median ms of the split step) over episodes on map `name`:
     one split step per episode, so several episodes keep a single slow sample from deciding it."""
     sc = load_named_scenario(name)
     geometry = Geometry(sc)
     ctx, path = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
-    ctrl = StafController(StafMethodConfig())
+    ctrl = StafController(StafMethodConfig(ensemble=ensemble or []))
     worlds = Worlds([sc], SensingConfig())
     from stafpipe.controllers.base import TeamInfo
 
@@ -96,14 +97,16 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=40, help="10-robot episodes timed per map")
     parser.add_argument("--maps", nargs="+", default=["corridor"], help="built-in maps of the 10-robot rows")
+    parser.add_argument("--ensemble", nargs="*", default=[], help="policy.pt files averaged with the shipped one")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    rows = [(name, *ten_robots(args.episodes, name)) for name in args.maps]
+    rows = [(name, *ten_robots(args.episodes, name, args.ensemble)) for name in args.maps]
     plan, feat, net, edges = thousand_robots(args.repeats)
     print("| team | per step (median) | 99th percentile step | split step (cut, median) | target |")
     print("|---|---|---|---|---|")
     for name, median, worst, split in rows:
-        print(f"| 10 robots, {name}, method=staf act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
+        what = f"method=staf, ensemble of {1 + len(args.ensemble)}" if args.ensemble else "method=staf"
+        print(f"| 10 robots, {name}, {what} act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
     print(
         f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "
         f"{plan + feat + net:.1f} ms | - | - | <= 50 ms |"

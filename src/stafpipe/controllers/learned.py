@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import zlib
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -77,16 +78,10 @@ class LearnedController(Controller):
         self.policy, self.made_by = load_policy(cfg.checkpoint, cfg.name)
         self._act = self.policy.frozen_act()  # the checkpoint's weights never change here
         self.teacher = getattr(cfg, "low_level", "learned")  # `learned`, or a hand-made low level (teachers.py)
-        differ = checkpoint_mismatch(cfg, self.made_by) if self.teacher == "learned" else {}
-        if differ:
-            text = "; ".join(f"{k}: this run {a!r}, trained with {b!r}" for k, (a, b) in differ.items())
-            where = cfg.checkpoint or f"the shipped {cfg.name} policy"
-            if not getattr(cfg, "allow_mismatch", False):
-                raise StafpipeError(
-                    f"{where} was trained with other settings than this run ({text}); retrain it, "
-                    "or set method.allow_mismatch=true to run it anyway"
-                )
-            log.warning("%s was trained with other settings than this run: %s", where, text)
+        self._check_made_by(cfg.checkpoint or f"the shipped {cfg.name} policy", self.made_by)
+        # `method.ensemble`: more training runs of the same network, whose action means are averaged with the
+        # checkpoint's (docs/staf.md, "Several training runs averaged")
+        self._acts = [self._act] + [self._member(k, path) for k, path in enumerate(getattr(cfg, "ensemble", []))]
         self.adapter = ADAPTERS[cfg.name](
             self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
         )
@@ -96,6 +91,36 @@ class LearnedController(Controller):
         torch.set_num_threads(1)
         self.max_speed = 1.0
         self.last_time = 0.0
+
+    def _check_made_by(self, where: str, made_by: dict[str, Any]) -> None:
+        """Refuse (or, with method.allow_mismatch, warn about) a checkpoint trained with other settings."""
+        differ = checkpoint_mismatch(self.cfg, made_by) if self.teacher == "learned" else {}
+        if differ:
+            text = "; ".join(f"{k}: this run {a!r}, trained with {b!r}" for k, (a, b) in differ.items())
+            if not getattr(self.cfg, "allow_mismatch", False):
+                raise StafpipeError(
+                    f"{where} was trained with other settings than this run ({text}); retrain it, "
+                    "or set method.allow_mismatch=true to run it anyway"
+                )
+            log.warning("%s was trained with other settings than this run: %s", where, text)
+
+    def _member(self, k: int, path: str) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
+        """The frozen action of `method.ensemble[k]`: the same network (policy config) as the checkpoint's, since
+        the adapter computes one set of features for all."""
+        key = f"method.ensemble[{k}]"
+        if not path:
+            raise StafpipeError(f"{key}: empty; give the path of a policy.pt of `stafpipe train-ppo`")
+        try:
+            member, made_by = load_policy(path, self.cfg.name)
+        except StafpipeError as e:
+            raise StafpipeError(f"{key}: {e}") from e
+        if member.cfg != self.policy.cfg:
+            raise StafpipeError(
+                f"{key} ({path}): another network than the checkpoint's (its policy config {member.cfg} against "
+                f"{self.policy.cfg}); an ensemble averages runs of one network"
+            )
+        self._check_made_by(f"{key} ({path})", made_by)
+        return member.frozen_act()
 
     def reset(self, team: TeamInfo) -> None:
         self.reset_worlds([team])
@@ -167,7 +192,10 @@ class LearnedController(Controller):
         world acts exactly as it would alone. It costs about 2.5x the network time of one call for 50 worlds
         (docs/decisions.md)."""
         own, edge, mask = (torch.from_numpy(x[w : w + 1]).clone() for x in (f.own, f.edge, f.mask))
-        mean = self._act(own, edge, mask)[0]
+        if len(self._acts) == 1:
+            mean = self._act(own, edge, mask)[0]
+        else:  # the ensemble's mean action; sampling (deterministic=false) uses the checkpoint's spread
+            mean = torch.stack([act(own, edge, mask)[0] for act in self._acts]).mean(0)
         if not self.cfg.deterministic:
             mean = mean + self.policy.log_std.exp() * torch.randn(mean.shape, generator=self.generators[w])
         return mean

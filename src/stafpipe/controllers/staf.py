@@ -20,7 +20,8 @@ class StafMethodConfig:
 
     name: str = "staf"
     checkpoint: str = ""
-    """A `policy.pt` of `stafpipe train-ppo train_ppo.method=staf`; empty: the one shipped with the package."""
+    """A `policy.pt` of `stafpipe train-ppo train_ppo.method=staf`; empty: the one shipped with the package;
+    `shipped:NAME`: NAME.pt shipped with it."""
     deterministic: bool = True
     """Act with the policy's mean (as evaluated); false samples from it."""
     sensing_radius: float = 2.0
@@ -28,6 +29,10 @@ class StafMethodConfig:
     allow_mismatch: bool = False
     """Run a checkpoint whose recorded training settings (plan, sensing radius) differ from this run's, with a
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
+    ensemble: list[str] = field(default_factory=list)
+    """More `policy.pt` files of the same network (other training runs, e.g. other seeds; `shipped:staf_seed1` ships):
+    each robot acts with the mean of their action means and the checkpoint's; empty (default): the checkpoint alone.
+    Each is checked as the checkpoint is (settings, `allow_mismatch`)."""
     low_level: str = "learned"
     """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf.md,
     `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed),

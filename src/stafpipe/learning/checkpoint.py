@@ -26,8 +26,28 @@ class PolicyCheckpointError(StafpipeError):
     """A policy checkpoint that is missing, damaged or of another kind."""
 
 
+SHIPPED = "shipped:"
+"""`shipped:NAME` names the checkpoint NAME.pt shipped with the package (e.g. `shipped:staf_seed1`)."""
+
+
 def shipped_policy(method: str) -> Path:
     return package_dir() / "checkpoints" / f"{method}.pt"
+
+
+def policy_path(path: str | Path, method: str) -> Path:
+    """The file a checkpoint setting names: empty, the one shipped for `method`; `shipped:NAME`, NAME.pt of the
+    package's checkpoints; else the path as given."""
+    text = str(path)
+    if not text:
+        return shipped_policy(method)
+    if not text.startswith(SHIPPED):
+        return Path(path)
+    name = text[len(SHIPPED) :]
+    found = shipped_policy(name)
+    if not name or "/" in name or not found.is_file():
+        names = sorted(p.stem for p in found.parent.glob("*.pt"))
+        raise PolicyCheckpointError(f"{text}: no checkpoint of that name ships with stafpipe (shipped: {names})")
+    return found
 
 
 def save_policy(path: Path, method: str, policy: PolicyNet, made_by: dict[str, Any]) -> Path:
@@ -42,8 +62,8 @@ def save_policy(path: Path, method: str, policy: PolicyNet, made_by: dict[str, A
 
 
 def load_policy(path: str | Path, method: str) -> tuple[PolicyNet, dict[str, Any]]:
-    """The policy of a checkpoint (`path` empty: the one shipped for `method`), in eval mode, and its record."""
-    path = Path(path) if path else shipped_policy(method)
+    """The policy of a checkpoint (`path` as `policy_path` reads it), in eval mode, and its record."""
+    path = policy_path(path, method)
     payload = load_payload(path, PolicyCheckpointError, "policy checkpoint", "train one with `stafpipe train-ppo`")
     if not isinstance(payload, dict) or payload.get("format") != FORMAT or payload.get("method") != method:
         found = (payload.get("format"), payload.get("method")) if isinstance(payload, dict) else type(payload).__name__
