@@ -76,12 +76,13 @@ class LearnedController(Controller):
             check()
         self.cfg = cfg
         self.policy, self.made_by = load_policy(cfg.checkpoint, cfg.name)
-        self._act = self.policy.frozen_act()  # the checkpoint's weights never change here
         self.teacher = getattr(cfg, "low_level", "learned")  # `learned`, or a hand-made low level (teachers.py)
         self._check_made_by(cfg.checkpoint or f"the shipped {cfg.name} policy", self.made_by)
-        # `method.ensemble`: more training runs of the same network, whose action means are averaged with the
-        # checkpoint's (docs/staf.md, "Several training runs averaged")
-        self._acts = [self._act] + [self._member(k, path) for k, path in enumerate(getattr(cfg, "ensemble", []))]
+        # frozen actions (the weights never change here): the checkpoint's, then those of `method.ensemble`, more
+        # training runs of the same network whose action means are averaged (docs/staf.md, "Several training runs
+        # averaged")
+        members = [self._member(k, path) for k, path in enumerate(getattr(cfg, "ensemble", []))]
+        self._acts = [self.policy.frozen_act(), *members]
         self.adapter = ADAPTERS[cfg.name](
             self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
         )
@@ -192,10 +193,9 @@ class LearnedController(Controller):
         world acts exactly as it would alone. It costs about 2.5x the network time of one call for 50 worlds
         (docs/decisions.md)."""
         own, edge, mask = (torch.from_numpy(x[w : w + 1]).clone() for x in (f.own, f.edge, f.mask))
-        if len(self._acts) == 1:
-            mean = self._act(own, edge, mask)[0]
-        else:  # the ensemble's mean action; sampling (deterministic=false) uses the checkpoint's spread
-            mean = torch.stack([act(own, edge, mask)[0] for act in self._acts]).mean(0)
+        # with `method.ensemble`, the members' mean action; sampling (deterministic=false) uses the checkpoint's spread
+        means = [act(own, edge, mask)[0] for act in self._acts]
+        mean = means[0] if len(means) == 1 else torch.stack(means).mean(0)
         if not self.cfg.deterministic:
             mean = mean + self.policy.log_std.exp() * torch.randn(mean.shape, generator=self.generators[w])
         return mean
