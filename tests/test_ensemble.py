@@ -50,8 +50,12 @@ def _commands(cfgs: list[StafMethodConfig], steps: int) -> list[np.ndarray]:
     return [np.stack(o) for o in out]
 
 
+ALONE = StafMethodConfig(checkpoint="shipped:staf")  # the shipped first run by itself (no partners: not the default)
+
+
 def test_an_ensemble_of_the_checkpoint_with_itself_acts_as_the_checkpoint() -> None:
-    alone, doubled = _commands([StafMethodConfig(), StafMethodConfig(ensemble=[str(shipped_policy("staf"))])], 40)
+    doubled = StafMethodConfig(checkpoint="shipped:staf", ensemble=[str(shipped_policy("staf"))])
+    alone, doubled = _commands([ALONE, doubled], 40)
     assert np.abs(alone).max() > 0.1  # the team moves
     assert np.array_equal(alone, doubled)  # (x + x) / 2 is x to the bit
 
@@ -59,7 +63,7 @@ def test_an_ensemble_of_the_checkpoint_with_itself_acts_as_the_checkpoint() -> N
 def test_an_ensemble_acts_with_the_mean_of_its_members_actions(tmp_path) -> None:
     other = _perturbed(tmp_path / "other.pt")
     a, b, both = _commands(
-        [StafMethodConfig(), StafMethodConfig(checkpoint=other), StafMethodConfig(ensemble=[other])], 60
+        [ALONE, StafMethodConfig(checkpoint=other), StafMethodConfig(checkpoint="shipped:staf", ensemble=[other])], 60
     )
     assert np.abs(a - b).max() > 0.05  # the two networks act differently
     # where neither member's action reaches the clip, the ensemble's is their mean
@@ -89,3 +93,15 @@ def test_the_shipped_second_run_is_named_shipped_and_fits_the_shipped_checkpoint
         load_policy("shipped:nope", "staf")
     with pytest.raises(StafpipeError, match=r"not a stafpipe staf policy checkpoint"):
         load_policy("shipped:dgnn", "staf")
+
+
+def test_the_shipped_staf_is_the_shipped_pair_and_a_users_checkpoint_acts_alone(tmp_path) -> None:
+    """`method.ensemble` unset: the shipped checkpoint comes with its partner run, any other checkpoint with none."""
+    pair = StafMethodConfig(checkpoint="shipped:staf", ensemble=["shipped:staf_seed1"])
+    mine = str(tmp_path / "mine.pt")  # a user's checkpoint: here the shipped first run saved under another name
+    save_policy(mine, "staf", *load_policy("", "staf"))
+    default, explicit, alone, user = _commands([StafMethodConfig(), pair, ALONE, StafMethodConfig(checkpoint=mine)], 60)
+    assert np.array_equal(default, explicit)
+    assert np.array_equal(alone, user)  # the user's network by itself, not mixed with the shipped second run
+    assert np.abs(default - alone).max() > 0.01
+    assert np.array_equal(_commands([StafMethodConfig(ensemble=[]), ALONE], 60)[0], alone)  # [] = no partners

@@ -13,6 +13,7 @@ import hashlib
 import importlib
 import logging
 import os
+import re
 import shutil
 import sys
 import time
@@ -168,8 +169,9 @@ def _discard_if_empty(out_dir: Path) -> None:
     if out_dir.is_dir() and _only_hydra_files(out_dir):
         _detach_file_logs(out_dir)
         shutil.rmtree(out_dir, ignore_errors=True)
-        with contextlib.suppress(OSError):  # and its date folder, if this run was the only one in it
-            out_dir.parent.rmdir()
+        if re.fullmatch(r"\d{4}-\d{2}-\d{2}", out_dir.parent.name):  # Hydra's date folder, if this run was alone
+            with contextlib.suppress(OSError):  # in it; never a folder the user named (it may be their cwd)
+                out_dir.parent.rmdir()
 
 
 def stage_task(cfg: DictConfig) -> None:

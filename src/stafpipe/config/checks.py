@@ -65,7 +65,7 @@ def _unknown_keys(node: DictConfig, path: str) -> None:
         child = node._get_node(key)  # the node itself, so that its type is kept
         if isinstance(child, DictConfig):
             _unknown_keys(child, f"{path}.{key}" if path else str(key))
-        elif isinstance(child, ListConfig):
+        elif isinstance(child, ListConfig) and not child._is_none():  # an unset optional list has no items
             for i, item in enumerate(child._iter_ex(resolve=False)):
                 if isinstance(item, DictConfig):
                     _unknown_keys(item, f"{path}.{key}[{i}]" if path else f"{key}[{i}]")

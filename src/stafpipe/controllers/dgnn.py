@@ -4,7 +4,7 @@ own goal slot; no subteams. Driven through `learning/adapters.py:DGNNAdapter`, a
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from stafpipe.controllers.learned import LearnedController
@@ -24,10 +24,10 @@ class DGNNConfig:
     allow_mismatch: bool = False
     """Run a checkpoint whose recorded training settings (plan, sensing radius) differ from this run's, with a
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
-    ensemble: list[str] = field(default_factory=list)
+    ensemble: list[str] | None = None
     """More `policy.pt` files of the same network (other training runs, e.g. other seeds): each robot acts with the
-    mean of their action means and the checkpoint's; empty (default): the checkpoint alone. Each is checked as the
-    checkpoint is (settings, `allow_mismatch`)."""
+    mean of their action means and the checkpoint's; unset or empty (default): the checkpoint alone (one DGNN run
+    ships). Each is checked as the checkpoint is (settings, `allow_mismatch`)."""
     low_level: str = "learned"
     """`learned` (the trained policy); or the method with its learned part removed (learning/teachers.py):
     `proportional` (a step towards the robot's guided goal), `avoiding` (the same with the classical methods'

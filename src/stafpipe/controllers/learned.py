@@ -16,7 +16,7 @@ import torch
 from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
-from stafpipe.learning.checkpoint import load_policy
+from stafpipe.learning.checkpoint import ensemble_paths, load_policy
 from stafpipe.learning.config import RewardConfig
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import teacher_actions
@@ -81,7 +81,8 @@ class LearnedController(Controller):
         # frozen actions (the weights never change here): the checkpoint's, then those of `method.ensemble`, more
         # training runs of the same network whose action means are averaged (docs/staf.md, "Several training runs
         # averaged")
-        members = [self._member(k, path) for k, path in enumerate(getattr(cfg, "ensemble", []))]
+        paths = ensemble_paths(cfg.checkpoint, getattr(cfg, "ensemble", []), cfg.name)
+        members = [self._member(k, path) for k, path in enumerate(paths)]
         self._acts = [self.policy.frozen_act(), *members]
         self.adapter = ADAPTERS[cfg.name](
             self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius

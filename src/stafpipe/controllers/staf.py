@@ -29,10 +29,12 @@ class StafMethodConfig:
     allow_mismatch: bool = False
     """Run a checkpoint whose recorded training settings (plan, sensing radius) differ from this run's, with a
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
-    ensemble: list[str] = field(default_factory=list)
-    """More `policy.pt` files of the same network (other training runs, e.g. other seeds; `shipped:staf_seed1` ships):
-    each robot acts with the mean of their action means and the checkpoint's; empty (default): the checkpoint alone.
-    Each is checked as the checkpoint is (settings, `allow_mismatch`)."""
+    ensemble: list[str] | None = None
+    """More `policy.pt` files of the same network (other training runs, e.g. other seeds): each robot acts with the
+    mean of their action means and the checkpoint's. Unset (default): with the shipped checkpoint (`checkpoint`
+    empty) the shipped pair, `staf.pt` + `staf_seed1.pt`; with any other checkpoint, that checkpoint alone. `[]`:
+    the checkpoint alone (`checkpoint=shipped:staf ensemble=[]` is the shipped first run by itself). Each member is
+    checked as the checkpoint is (settings, `allow_mismatch`)."""
     low_level: str = "learned"
     """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf.md,
     `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed),
