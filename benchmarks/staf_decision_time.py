@@ -1,12 +1,14 @@
 """Decision time of STAF for one control step (plan + deep graph cut when it splits + intermediate GNN + policy).
 
 Usage: python benchmarks/staf_decision_time.py [--repeats 30] [--episodes 40] [--maps corridor doorway ...]
-       [--ensemble B.pt C.pt]  (the 10-robot rows with `method.ensemble`: one forward pass more per member)
-Targets (STAF issue): 10 robots <= 1 ms per step, 1,000 robots <= 50 ms. One torch thread, the shipped policy and
-deep graph cut. 10 robots: `method=staf`'s own act() on the corridor (dense features from the harness' observation),
-timed per step over whole episodes; the split step (which runs the cut) is reported apart. 1,000 robots: a 40 x 25
-grid of robots (1 m spacing) heading through a 1 km corridor, edge-list features (k-d tree within 2 m) and the
-edge-list forward pass; sensing (the harness' observation) is not part of the decision and is excluded.
+       [--ensemble B.pt C.pt]  (the 10-robot rows with `method.ensemble`: one forward pass more per member;
+       `--ensemble` alone: the shipped `staf.pt` by itself)
+Targets (STAF issue): 10 robots <= 1 ms per step, 1,000 robots <= 50 ms. One torch thread, the shipped policy (its two
+runs averaged, as `method=staf` runs it) and deep graph cut. 10 robots: `method=staf`'s own act() on the corridor
+(dense features from the harness' observation), timed per step over whole episodes; the split step (which runs the
+cut) is reported apart. 1,000 robots: a 40 x 25 grid of robots (1 m spacing) heading through a 1 km corridor,
+edge-list features (k-d tree within 2 m) and the edge-list forward pass; sensing (the harness' observation) is not
+part of the decision and is excluded.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from stafpipe.controllers.staf_plan import StafPlan
 from stafpipe.episode import episode_context
 from stafpipe.geometry import Geometry
 from stafpipe.highlevel.infer import divider
-from stafpipe.learning.checkpoint import load_policy
+from stafpipe.learning.checkpoint import ensemble_paths, load_policy
 from stafpipe.learning.features import staf_pairs
 from stafpipe.scenario import build_scenario
 from stafpipe.sensing import SensingConfig
@@ -39,7 +41,7 @@ def ten_robots(episodes: int, name: str = "corridor", ensemble: list[str] | None
     sc = load_named_scenario(name)
     geometry = Geometry(sc)
     ctx, path = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
-    ctrl = StafController(StafMethodConfig(ensemble=ensemble or []))
+    ctrl = StafController(StafMethodConfig(ensemble=ensemble))
     worlds = Worlds([sc], SensingConfig())
     from stafpipe.controllers.base import TeamInfo
 
@@ -57,8 +59,9 @@ def ten_robots(episodes: int, name: str = "corridor", ensemble: list[str] | None
     return statistics.median(times), float(np.percentile(times, 99)), statistics.median(split_ms)
 
 
-def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
-    """(plan ms, features ms, network ms, edges) for 1,000 robots."""
+def thousand_robots(repeats: int, ensemble: list[str] | None = None) -> tuple[float, float, float, int]:
+    """(plan ms, features ms, network ms, edges) for 1,000 robots; the network time is every run's (`ensemble` as
+    `method.ensemble` reads it)."""
     base = load_named_scenario("corridor")
     spec = dataclasses.replace(
         base.spec,
@@ -67,7 +70,8 @@ def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
         team=dataclasses.replace(base.spec.team, formation="square", n=1000, start=[0.0, 6.0], goal=[1000.0, 6.0]),
     )
     sc = build_scenario(spec)
-    policy, _ = load_policy("", "staf")
+    policies = [load_policy(path, "staf")[0] for path in ["", *ensemble_paths("", ensemble, "staf")]]
+    policy = policies[0]
     template = sc.template()
     pos = template + [0.0, 6.0]
     goal = template + [1000.0, 6.0]
@@ -85,7 +89,8 @@ def thousand_robots(repeats: int) -> tuple[float, float, float, int]:
         )
         t2 = time.perf_counter()
         with torch.inference_mode():
-            policy.act_sparse(torch.from_numpy(own), torch.from_numpy(receiver), torch.from_numpy(diff))
+            x = (torch.from_numpy(own), torch.from_numpy(receiver), torch.from_numpy(diff))
+            torch.stack([p.act_sparse(*x) for p in policies]).mean(0)
         t3 = time.perf_counter()
         plan_ms.append(1000 * (t1 - t0)), feat_ms.append(1000 * (t2 - t1)), net_ms.append(1000 * (t3 - t2))
         edges = len(receiver)
@@ -97,15 +102,18 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=40, help="10-robot episodes timed per map")
     parser.add_argument("--maps", nargs="+", default=["corridor"], help="built-in maps of the 10-robot rows")
-    parser.add_argument("--ensemble", nargs="*", default=[], help="policy.pt files averaged with the shipped one")
+    parser.add_argument(
+        "--ensemble", nargs="*", default=None, help="policy.pt files averaged with staf.pt (none: it alone)"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     rows = [(name, *ten_robots(args.episodes, name, args.ensemble)) for name in args.maps]
-    plan, feat, net, edges = thousand_robots(args.repeats)
+    plan, feat, net, edges = thousand_robots(args.repeats, args.ensemble)
     print("| team | per step (median) | 99th percentile step | split step (cut, median) | target |")
     print("|---|---|---|---|---|")
     for name, median, worst, split in rows:
-        what = f"method=staf, ensemble of {1 + len(args.ensemble)}" if args.ensemble else "method=staf"
+        runs = 1 + len(ensemble_paths("", args.ensemble, "staf"))
+        what = f"method=staf, {runs} run{'s' if runs > 1 else ''}"
         print(f"| 10 robots, {name}, {what} act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
     print(
         f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "

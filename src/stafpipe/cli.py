@@ -214,6 +214,13 @@ def export(
         "", "--checkpoint", help="A policy.pt / high-level checkpoint; empty: the shipped one."
     ),
     output: str = typer.Option("", "--output", help="The ONNX file to write; empty: outputs/export/NETWORK.onnx."),
+    ensemble: list[str] = typer.Option(
+        None,
+        "--ensemble",
+        help="Another training run of the policy to average in (repeat it; as method.ensemble); not given: the "
+        "shipped partner run with the shipped staf checkpoint, none with any other; --no-ensemble: none.",
+    ),
+    no_ensemble: bool = typer.Option(False, "--no-ensemble", help="The checkpoint alone, without partner runs."),
 ) -> None:
     """Write a learned network as ONNX for a robot (inputs, outputs and frames: docs/export.md)."""
     from pathlib import Path
@@ -221,7 +228,10 @@ def export(
     from stafpipe.export_onnx import export as export_network
 
     try:
-        path = export_network(network, checkpoint, Path(output or f"outputs/export/{network}.onnx"))
+        if no_ensemble and ensemble:
+            raise StafpipeError("export: --ensemble and --no-ensemble together")
+        members = [] if no_ensemble else (list(ensemble) if ensemble else None)
+        path = export_network(network, checkpoint, Path(output or f"outputs/export/{network}.onnx"), members)
     except StafpipeError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None

@@ -35,14 +35,20 @@ OPSET = 18
 
 
 class PolicyMean(nn.Module):
-    """The execution part of a learned policy: action means (n, 2) of one team."""
+    """The execution part of a learned policy: action means (n, 2) of one team; with more training runs of the
+    network (`method.ensemble`), the mean of their action means, as the eval controller acts."""
 
-    def __init__(self, policy: PolicyNet):
+    def __init__(self, policy: PolicyNet, *members: PolicyNet):
         super().__init__()
         self.policy = policy
+        self.members = nn.ModuleList(members)
 
     def forward(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        return self.policy.act(own, edge, mask)
+        mean = self.policy.act(own, edge, mask)
+        if len(self.members):
+            means = [mean, *(m.act(own, edge, mask) for m in self.members)]  # type: ignore[operator]
+            mean = torch.stack(means).mean(0)
+        return mean
 
 
 class DenseGraphCut(nn.Module):
@@ -101,8 +107,11 @@ def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Ten
     }
 
 
-def load_network(network: str, checkpoint: str = "") -> tuple[nn.Module, dict]:
-    """The exportable module of `network` from `checkpoint` (empty: the shipped one) and the checkpoint's record."""
+def load_network(network: str, checkpoint: str = "", ensemble: list[str] | None = None) -> tuple[nn.Module, dict]:
+    """The exportable module of `network` from `checkpoint` (empty: the shipped one) and the checkpoint's record. A
+    policy comes with the runs `ensemble` names, by the eval controller's rule (`ensemble_paths`: unset, the shipped
+    partners of the shipped checkpoint), so the file acts as `stafpipe eval` does; the record then lists every run's
+    under `ensemble`."""
     if network not in NETWORKS:
         raise StafpipeError(f"export: network must be one of {list(NETWORKS)}, got {network!r}")
     if network == "high":
@@ -110,17 +119,30 @@ def load_network(network: str, checkpoint: str = "") -> tuple[nn.Module, dict]:
 
         model, made_by = load_checkpoint(checkpoint)
         return DenseGraphCut(model).eval(), made_by
-    from stafpipe.learning.checkpoint import load_policy
+    from stafpipe.learning.checkpoint import ensemble_paths, load_policy
 
     policy, made_by = load_policy(checkpoint, network)
-    return PolicyMean(policy).eval(), made_by
+    members = []
+    for k, path in enumerate(ensemble_paths(checkpoint, ensemble, network)):
+        try:
+            member, member_by = load_policy(path, network)
+        except StafpipeError as exc:
+            raise StafpipeError(f"export: ensemble[{k}]: {exc}") from None
+        if member.cfg != policy.cfg:
+            raise StafpipeError(f"export: ensemble[{k}] ({path}): another network than the checkpoint's")
+        members.append(member)
+        made_by = {**made_by, "ensemble": [*made_by.get("ensemble", []), {"path": path, "made_by": member_by}]}
+    return PolicyMean(policy, *members).eval(), made_by
 
 
-def export(network: str, checkpoint: str, out: Path) -> Path:
-    """Write `network` of `checkpoint` to `out` as ONNX (atomically), with a dynamic robot count."""
+def export(network: str, checkpoint: str, out: Path, ensemble: list[str] | None = None) -> Path:
+    """Write `network` of `checkpoint` (with `ensemble`, as `load_network` reads it) to `out` as ONNX (atomically),
+    with a dynamic robot count."""
     import onnx  # the `onnx` extra: onnx, onnxscript (torch's exporter)
 
-    module, made_by = load_network(network, checkpoint)
+    if network == "high" and ensemble:
+        raise StafpipeError("export: --ensemble is for the policies (staf, dgnn), not the deep graph cut")
+    module, made_by = load_network(network, checkpoint, ensemble)
     inputs = example_inputs(network, module)
     robots = torch.export.Dim("robots", min=2, max=4096)
     shapes = {

@@ -38,7 +38,7 @@ generated validation maps against 25.0 / 1.45 for `staf.pt` alone (docs/staf.md,
 
 def ensemble_paths(checkpoint: str, ensemble: list[str] | None, method: str) -> list[str]:
     """The runs averaged with the checkpoint: `method.ensemble` as given; unset, the shipped partners when the
-    checkpoint is the shipped one (empty) and none with any other, so a user's own checkpoint is never mixed with ours."""
+    checkpoint is the shipped one (empty) and none with any other (a user's own checkpoint is never mixed with ours)."""
     if ensemble is not None:
         return list(ensemble)
     return list(SHIPPED_PARTNERS.get(method, ())) if not checkpoint else []
