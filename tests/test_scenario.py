@@ -174,6 +174,20 @@ def test_malformed_scenario_through_the_cli_exits_2_and_leaves_nothing(workdir, 
     assert not list(workdir.rglob("results.parquet")) and not list(workdir.rglob("*.mcap"))
 
 
+def test_a_failed_run_removes_its_own_empty_folder_and_never_the_folder_the_user_named(workdir) -> None:
+    """The run's directory goes (nothing in it but Hydra's files), and Hydra's date folder with it when empty; an
+    empty folder the user made and named as the run's parent stays (it may be where they stand)."""
+    bad = workdir / "bad.yaml"
+    bad.write_text(complete("robot: {drive: hovercraft}\n"))
+    mine = workdir / "mine"
+    mine.mkdir()
+    assert launch("eval", [f"scenario.path={bad}", f"hydra.run.dir={mine / 'run'}"]) == 2
+    assert mine.is_dir() and not (mine / "run").exists()
+    dated = workdir / "outputs" / "eval" / "2026-12-06"
+    assert launch("eval", [f"scenario.path={bad}", f"hydra.run.dir={dated / 'run'}"]) == 2
+    assert not dated.exists() and (workdir / "outputs" / "eval").is_dir()
+
+
 def test_a_folder_of_maps_given_as_the_scenario_is_named_a_folder(tmp_path) -> None:
     (tmp_path / "maps").mkdir()
     with pytest.raises(ScenarioError, match=r"maps is a directory; name one scenario YAML in it"):
