@@ -106,3 +106,23 @@ def test_a_users_config_dir_serves_a_stage_and_every_pipeline_step(workdir, caps
     assert single.exit_code == 0 and len(job_dirs(workdir)) == 2
     bad = CliRunner().invoke(app, ["run", path, "--config-dir", str(workdir / "nowhere")])
     assert bad.exit_code == 2 and "not a directory" in bad.output
+
+
+@pytest.mark.slow  # composes the pipeline's seven steps: about 4-5 s
+def test_staf_train_is_the_recipe_of_both_shipped_staf_runs(tmp_path) -> None:
+    """`stafpipe run staf_train`'s two train steps compose to the configs recorded beside `staf.pt` and
+    `staf_seed1.pt` (maps and validation maps the same steps, by their config hashes); a recipe edited without
+    retraining fails here."""
+    import yaml
+    from omegaconf import OmegaConf
+
+    from stafpipe.paths import package_dir
+    from stafpipe.pipeline import find_pipeline, load_pipeline, plan_pipeline
+
+    steps = {s.name: cfg for s, _, _, _, cfg in plan_pipeline(load_pipeline(find_pipeline("staf_train")), tmp_path, [])}
+    root = f"{tmp_path.resolve()}/"
+    for step, shipped in (("train", "staf"), ("train_seed1", "staf_seed1")):
+        ours = yaml.safe_load(OmegaConf.to_yaml(steps[step], resolve=True).replace(root, "outputs/"))
+        recorded = yaml.safe_load((package_dir() / "checkpoints" / f"{shipped}.yaml").read_text())
+        for key in ("seed", "train_ppo", "sensing", "world", "robot"):
+            assert ours[key] == recorded[key], (shipped, key)

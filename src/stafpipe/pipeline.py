@@ -162,9 +162,30 @@ def run_pipeline(
     config directories, searched by every step (`stafpipe run --config-dir`)."""
     pipe = load_pipeline(find_pipeline(name_or_path))
     extra = [search_path_override(config_dirs)] if config_dirs else []
+    plan = plan_pipeline(pipe, out_root, extra)
+    for i, (step, overrides, run_dir, digest, cfg) in enumerate(plan, start=1):
+        head = f"[{i}/{len(plan)}] {step.name} ({step.stage})"
+        if not force and _is_done(run_dir, digest, inputs_hash(cfg)):  # inputs: once the steps before are done
+            print(f"{head}: skipped, already done for this config in {run_dir}")
+            continue
+        started = time.perf_counter()
+        code = launch(step.stage, [*overrides, f"hydra.run.dir='{run_dir}'"])
+        if code != 0 or not _is_done(run_dir, digest):
+            print(f"{head}: failed (exit code {code}); pipeline {pipe.name} stopped")
+            return code or 1
+        print(f"{head}: done in {time.perf_counter() - started:.1f} s -> {run_dir}")
+    print(f"pipeline {pipe.name}: all {len(plan)} steps done")
+    return 0
+
+
+def plan_pipeline(
+    pipe: Pipeline, out_root: Path, extra: list[str]
+) -> list[tuple[PipelineStep, list[str], Path, str, DictConfig]]:
+    """Every step composed (a bad config stops the pipeline before any work): the step, its overrides with earlier
+    steps' directories filled in, its run directory, its config hash and its config."""
     dirs: dict[str, Path] = {}
     plan: list[tuple[PipelineStep, list[str], Path, str, DictConfig]] = []
-    for i, step in enumerate(pipe.steps):  # compose every step first: a bad config stops the pipeline before any work
+    for i, step in enumerate(pipe.steps):
         if step.stage not in STAGE_FUNCTIONS:
             raise StafpipeError(
                 f"pipeline {pipe.name}: step '{step.name}': unknown stage {step.stage!r}; stages: "
@@ -193,17 +214,4 @@ def run_pipeline(
         run_dir = (out_root / "pipelines" / home / f"{number:02d}-{short}-{digest[:10]}").resolve()
         dirs[step.name] = run_dir
         plan.append((step, overrides, run_dir, digest, cfg))
-
-    for i, (step, overrides, run_dir, digest, cfg) in enumerate(plan, start=1):
-        head = f"[{i}/{len(plan)}] {step.name} ({step.stage})"
-        if not force and _is_done(run_dir, digest, inputs_hash(cfg)):  # inputs: once the steps before are done
-            print(f"{head}: skipped, already done for this config in {run_dir}")
-            continue
-        started = time.perf_counter()
-        code = launch(step.stage, [*overrides, f"hydra.run.dir='{run_dir}'"])
-        if code != 0 or not _is_done(run_dir, digest):
-            print(f"{head}: failed (exit code {code}); pipeline {pipe.name} stopped")
-            return code or 1
-        print(f"{head}: done in {time.perf_counter() - started:.1f} s -> {run_dir}")
-    print(f"pipeline {pipe.name}: all {len(plan)} steps done")
-    return 0
+    return plan
