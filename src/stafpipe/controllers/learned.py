@@ -83,6 +83,9 @@ class LearnedController(Controller):
         # averaged")
         paths = ensemble_paths(cfg.checkpoint, getattr(cfg, "ensemble", []), cfg.name)
         members = [self._member(k, path) for k, path in enumerate(paths)]
+        if paths:  # the run's config may leave `method.ensemble` unset: its log says what acted
+            runs = [cfg.checkpoint or f"shipped:{cfg.name}", *paths]
+            log.info("%s acts with the mean action of %d runs: %s", cfg.name, len(runs), ", ".join(runs))
         self._acts = [self.policy.frozen_act(), *members]
         self.adapter = ADAPTERS[cfg.name](
             self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
