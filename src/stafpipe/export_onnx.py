@@ -119,20 +119,14 @@ def load_network(network: str, checkpoint: str = "", ensemble: list[str] | None 
 
         model, made_by = load_checkpoint(checkpoint)
         return DenseGraphCut(model).eval(), made_by
-    from stafpipe.learning.checkpoint import ensemble_paths, load_policy
+    from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
 
     policy, made_by = load_policy(checkpoint, network)
-    members = []
-    for k, path in enumerate(ensemble_paths(checkpoint, ensemble, network)):
-        try:
-            member, member_by = load_policy(path, network)
-        except StafpipeError as exc:
-            raise StafpipeError(f"export: ensemble[{k}]: {exc}") from None
-        if member.cfg != policy.cfg:
-            raise StafpipeError(f"export: ensemble[{k}] ({path}): another network than the checkpoint's")
-        members.append(member)
-        made_by = {**made_by, "ensemble": [*made_by.get("ensemble", []), {"path": path, "made_by": member_by}]}
-    return PolicyMean(policy, *members).eval(), made_by
+    paths = ensemble_paths(checkpoint, ensemble, network)
+    members = load_members(paths, policy, network, "export: ensemble")
+    if members:
+        made_by = {**made_by, "ensemble": [{"path": path, "made_by": record} for path, _, record in members]}
+    return PolicyMean(policy, *(member for _, member, _ in members)).eval(), made_by
 
 
 def export(network: str, checkpoint: str, out: Path, ensemble: list[str] | None = None) -> Path:

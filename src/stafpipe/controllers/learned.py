@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import zlib
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -16,7 +15,7 @@ import torch
 from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
-from stafpipe.learning.checkpoint import ensemble_paths, load_policy
+from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
 from stafpipe.learning.config import RewardConfig
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import teacher_actions
@@ -82,11 +81,13 @@ class LearnedController(Controller):
         # training runs of the same network whose action means are averaged (docs/staf.md, "Several training runs
         # averaged")
         paths = ensemble_paths(cfg.checkpoint, getattr(cfg, "ensemble", []), cfg.name)
-        members = [self._member(k, path) for k, path in enumerate(paths)]
+        self._acts = [self.policy.frozen_act()]
+        for k, (path, member, made_by) in enumerate(load_members(paths, self.policy, cfg.name, "method.ensemble")):
+            self._check_made_by(f"method.ensemble[{k}] ({path})", made_by)
+            self._acts.append(member.frozen_act())
         if paths:  # the run's config may leave `method.ensemble` unset: its log says what acted
             runs = [cfg.checkpoint or f"shipped:{cfg.name}", *paths]
             log.info("%s acts with the mean action of %d runs: %s", cfg.name, len(runs), ", ".join(runs))
-        self._acts = [self.policy.frozen_act(), *members]
         self.adapter = ADAPTERS[cfg.name](
             self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
         )
@@ -108,24 +109,6 @@ class LearnedController(Controller):
                     "or set method.allow_mismatch=true to run it anyway"
                 )
             log.warning("%s was trained with other settings than this run: %s", where, text)
-
-    def _member(self, k: int, path: str) -> Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]:
-        """The frozen action of `method.ensemble[k]`: the same network (policy config) as the checkpoint's, since
-        the adapter computes one set of features for all."""
-        key = f"method.ensemble[{k}]"
-        if not path:
-            raise StafpipeError(f"{key}: empty; give the path of a policy.pt of `stafpipe train-ppo`")
-        try:
-            member, made_by = load_policy(path, self.cfg.name)
-        except StafpipeError as e:
-            raise StafpipeError(f"{key}: {e}") from e
-        if member.cfg != self.policy.cfg:
-            raise StafpipeError(
-                f"{key} ({path}): another network than the checkpoint's (its policy config {member.cfg} against "
-                f"{self.policy.cfg}); an ensemble averages runs of one network"
-            )
-        self._check_made_by(f"{key} ({path})", made_by)
-        return member.frozen_act()
 
     def reset(self, team: TeamInfo) -> None:
         self.reset_worlds([team])

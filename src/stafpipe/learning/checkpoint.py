@@ -89,3 +89,26 @@ def load_policy(path: str | Path, method: str) -> tuple[PolicyNet, dict[str, Any
         raise PolicyCheckpointError(f"{path}: weights do not fit the policy its config describes ({exc})") from None
     policy.eval()
     return policy, payload.get("made_by", {})
+
+
+def load_members(
+    paths: list[str], policy: PolicyNet, method: str, key: str
+) -> list[tuple[str, PolicyNet, dict[str, Any]]]:
+    """(path, policy, record) of each run in `paths`, every one the same network as `policy` (the same policy config:
+    one set of features serves them all); an error names `key[k]`."""
+    members = []
+    for k, path in enumerate(paths):
+        where = f"{key}[{k}]"
+        if not path:
+            raise PolicyCheckpointError(f"{where}: empty; give the path of a policy.pt of `stafpipe train-ppo`")
+        try:
+            member, made_by = load_policy(path, method)
+        except StafpipeError as exc:
+            raise PolicyCheckpointError(f"{where}: {exc}") from None
+        if member.cfg != policy.cfg:
+            raise PolicyCheckpointError(
+                f"{where} ({path}): another network than the checkpoint's (its policy config {member.cfg} against "
+                f"{policy.cfg}); an ensemble averages runs of one network"
+            )
+        members.append((path, member, made_by))
+    return members
