@@ -89,8 +89,9 @@ def test_the_shipped_second_run_is_named_shipped_and_fits_the_shipped_checkpoint
     pairs = zip(first.state_dict().values(), second.state_dict().values(), strict=True)
     assert any(not torch.equal(a, b) for a, b in pairs)  # another run, not a copy
     make_controller(StafMethodConfig(ensemble=["shipped:staf_seed1"]))  # its recorded settings are the run's
-    with pytest.raises(StafpipeError, match=r"shipped:nope: no checkpoint of that name.*staf_seed1"):
+    with pytest.raises(StafpipeError, match=r"shipped:nope: no checkpoint of that name.*staf_seed1") as refused:
         load_policy("shipped:nope", "staf")
+    assert "high_level" not in str(refused.value)  # the deep graph cut ships too, but is not a policy
     with pytest.raises(StafpipeError, match=r"not a stafpipe staf policy checkpoint"):
         load_policy("shipped:dgnn", "staf")
 

@@ -48,6 +48,24 @@ def shipped_policy(method: str) -> Path:
     return package_dir() / "checkpoints" / f"{method}.pt"
 
 
+def shipped_policies() -> list[str]:
+    """Names of the shipped policy checkpoints: those whose recorded config (NAME.yaml beside NAME.pt) is a
+    `train-ppo` run's (the deep graph cut ships too, but is not a policy)."""
+    folder = package_dir() / "checkpoints"
+    return sorted(
+        p.stem
+        for p in folder.glob("*.pt")
+        if any(line.strip() == "stage: train-ppo" for line in _lines(p.with_suffix(".yaml")))
+    )
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        return path.read_text().splitlines()
+    except OSError:
+        return []
+
+
 def policy_path(path: str | Path, method: str) -> Path:
     """The file a checkpoint setting names: empty, the one shipped for `method`; `shipped:NAME`, NAME.pt of the
     package's checkpoints; else the path as given."""
@@ -59,8 +77,9 @@ def policy_path(path: str | Path, method: str) -> Path:
     name = text[len(SHIPPED) :]
     found = shipped_policy(name)
     if not name or "/" in name or not found.is_file():
-        names = sorted(p.stem for p in found.parent.glob("*.pt"))
-        raise PolicyCheckpointError(f"{text}: no checkpoint of that name ships with stafpipe (shipped: {names})")
+        raise PolicyCheckpointError(
+            f"{text}: no checkpoint of that name ships with stafpipe (shipped policies: {shipped_policies()})"
+        )
     return found
 
 
