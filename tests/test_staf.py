@@ -394,6 +394,21 @@ def test_separated_pushes_close_targets_apart_and_leaves_the_rest() -> None:
     assert d.min() > 0.5 - 1e-6
 
 
+def test_short_of_ahead_holds_a_target_short_of_the_robot_ahead_in_its_own_subteam_only() -> None:
+    """`plan.short_of_ahead`: robot 0 at x = 0 aims at x = 1.9, 0.1 m from robot 1 ahead at x = 2 (same subteam): its
+    target comes back to 0.7 m behind robot 1, on robot 0's side; the robot ahead, a target already clear and a robot
+    of another subteam ahead are left alone."""
+    from stafpipe.controllers.plan_geometry import short_of_ahead
+
+    pos = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 3.0], [2.0, 3.1], [5.0, 0.0]])
+    targets = np.array([[1.9, 0.0], [3.0, 0.0], [1.9, 3.0], [3.0, 3.1], [4.0, 0.0]])
+    progress = pos[:, 0]
+    labels = np.array([0, 0, 1, 2, 0])  # robot 2 has robot 3 ahead, but in another subteam
+    out = short_of_ahead(targets, pos, progress, labels, 0.7)
+    assert np.allclose(out[0], [1.3, 0.0])
+    assert np.allclose(out[1:], targets[1:])  # robot 1: 2 m short of robot 4; robot 4: nobody ahead
+
+
 def test_separated_inside_bounds_pushes_apart_along_the_edge() -> None:
     """Two targets clipped onto the world's edge 0.12 m apart (seen on a generated corridor: a waiting column's rear
     clipped at x = 0.35): pushed apart inside the bounds they end >= the distance apart, where clipping after the

@@ -104,6 +104,10 @@ class PlanConfig:
     """With `in_world` and `target_gap`: targets are pushed apart inside the world's bounds (`separated(bounds=)`);
     false: pushed apart first and clipped to the bounds after, as the shipped policy was trained, which could bring
     two targets at the world's edge back to 0.12 m apart, and their robots into contact (docs/staf.md)."""
+    short_of_ahead: float = 0.0
+    """> 0: a target within 2r + this of a robot of its own subteam further along the path is put that far short of
+    that robot, on the follower's side, so no robot aims into the one ahead of it (a column turning towards a door
+    while its front robot still turns); 0: off, as trained (docs/staf.md)."""
     lead_past_end: bool = True
     """A subteam's anchor leads its robots' mean progress by at most `max_lead` plus the length the path's end cuts
     off its column's slots (`StafPlan._cut_at_end`): a column longer than the way left to the goal no longer holds
@@ -143,4 +147,5 @@ class PlanConfig:
         require(self.cut_frame in ("travel", "world"), f"{key}.cut_frame", "must be travel or world", self.cut_frame)
         require(self.home in ("regroup", "departure"), f"{key}.home", "must be regroup or departure", self.home)
         require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
+        require(self.short_of_ahead >= 0, f"{key}.short_of_ahead", "must be >= 0", self.short_of_ahead)
         require(self.home_approach >= 0, f"{key}.home_approach", "must be >= 0", self.home_approach)

@@ -212,3 +212,22 @@ def clear_arc(frame, clearance, pos: np.ndarray, own: np.ndarray, s: np.ndarray,
     ways = pos[:, None, None] + t * (aims[:, :, None] - pos[:, None, None])  # (m, k, 2 k, 2)
     clear = (clearance(ways) >= keep).all(axis=2)
     return arcs[np.arange(len(pos)), np.where(clear.any(axis=1), clear.argmax(axis=1), 0)]
+
+
+def short_of_ahead(
+    targets: np.ndarray, pos: np.ndarray, progress: np.ndarray, labels: np.ndarray, distance: float
+) -> np.ndarray:
+    """`targets` (n, 2), each within `distance` of a robot of its own subteam further along the path (`progress`)
+    moved to `distance` short of the nearest such robot, on the line from it back to the target's own robot."""
+    gap = targets[:, None, :] - pos[None, :, :]
+    close = (gap * gap).sum(-1)
+    close = np.where((progress[None, :] > progress[:, None]) & (labels[None, :] == labels[:, None]), close, np.inf)
+    near = close.argmin(1)
+    hit = close[np.arange(len(targets)), near] < distance * distance
+    if not hit.any():
+        return targets
+    out = targets.copy()
+    back = pos[hit] - pos[near[hit]]
+    length = np.sqrt((back * back).sum(-1, keepdims=True))
+    out[hit] = np.where(length > 1e-9, pos[near[hit]] + distance * back / np.maximum(length, 1e-9), targets[hit])
+    return out

@@ -128,6 +128,9 @@ class StafPlan:
         if self.cfg.target_gap > 0:
             inside = self.bounds if self.cfg.in_world and self.cfg.separate_in_world else None
             targets = geo.separated(targets, 2 * self.radius + self.cfg.target_gap, bounds=inside)
+        if self.cfg.short_of_ahead > 0 and self.split_done and not self.regrouped:  # subteams on their way
+            progress = self.frame.progress(pos)
+            targets = geo.short_of_ahead(targets, pos, progress, self.labels, 2 * self.radius + self.cfg.short_of_ahead)
         if self.cfg.in_sight:
             targets = self._in_sight(pos, targets, dt)
         if self.cfg.in_world:  # np.clip's values without its call overhead (a cost of every control step)
