@@ -111,9 +111,9 @@ def main() -> None:
     plan, feat, net, edges = thousand_robots(args.repeats, args.ensemble)
     print("| team | per step (median) | 99th percentile step | split step (cut, median) | target |")
     print("|---|---|---|---|---|")
+    runs = 1 + len(ensemble_paths("", args.ensemble, "staf"))
+    what = f"method=staf, {runs} run{'s' if runs > 1 else ''}"
     for name, median, worst, split in rows:
-        runs = 1 + len(ensemble_paths("", args.ensemble, "staf"))
-        what = f"method=staf, {runs} run{'s' if runs > 1 else ''}"
         print(f"| 10 robots, {name}, {what} act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
     print(
         f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "

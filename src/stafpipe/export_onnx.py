@@ -117,6 +117,8 @@ def load_network(network: str, checkpoint: str = "", ensemble: list[str] | None 
     if network == "high":
         from stafpipe.highlevel.checkpoint import load_checkpoint
 
+        if ensemble:
+            raise StafpipeError("export: --ensemble is for the policies (staf, dgnn), not the deep graph cut")
         model, made_by = load_checkpoint(checkpoint)
         return DenseGraphCut(model).eval(), made_by
     from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
@@ -134,8 +136,6 @@ def export(network: str, checkpoint: str, out: Path, ensemble: list[str] | None 
     with a dynamic robot count."""
     import onnx  # the `onnx` extra: onnx, onnxscript (torch's exporter)
 
-    if network == "high" and ensemble:
-        raise StafpipeError("export: --ensemble is for the policies (staf, dgnn), not the deep graph cut")
     module, made_by = load_network(network, checkpoint, ensemble)
     inputs = example_inputs(network, module)
     robots = torch.export.Dim("robots", min=2, max=4096)

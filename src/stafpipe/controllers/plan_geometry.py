@@ -10,7 +10,7 @@ from itertools import permutations
 import numpy as np
 
 from stafpipe.formations import formation_slots, rotation
-from stafpipe.geometry import obstacle_distance
+from stafpipe.geometry import lengths, obstacle_distance
 from stafpipe.highlevel.graphs import radius_adjacency
 
 
@@ -228,6 +228,6 @@ def short_of_ahead(
         return targets
     out = targets.copy()
     back = pos[hit] - pos[near[hit]]
-    length = np.sqrt((back * back).sum(-1, keepdims=True))
+    length = lengths(back, keepdims=True)
     out[hit] = np.where(length > 1e-9, pos[near[hit]] + distance * back / np.maximum(length, 1e-9), targets[hit])
     return out

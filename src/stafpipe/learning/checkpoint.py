@@ -32,8 +32,8 @@ SHIPPED = "shipped:"
 
 SHIPPED_PARTNERS: dict[str, tuple[str, ...]] = {"staf": ("shipped:staf_seed1",)}
 """The shipped policy of a method acts with these other training runs of its network averaged in (`method.ensemble`
-left unset and `method.checkpoint` empty): STAF's two runs, 6.5 SR points short / 0.65 contacts summed over 60
-generated validation maps against 25.0 / 1.45 for `staf.pt` alone (docs/staf.md, "Several training runs averaged")."""
+left unset and `method.checkpoint` empty): STAF's two runs (how much better than one: docs/staf.md, "The pair as
+the default")."""
 
 
 def ensemble_paths(checkpoint: str, ensemble: list[str] | None, method: str) -> list[str]:
@@ -51,19 +51,15 @@ def shipped_policy(method: str) -> Path:
 def shipped_policies() -> list[str]:
     """Names of the shipped policy checkpoints: those whose recorded config (NAME.yaml beside NAME.pt) is a
     `train-ppo` run's (the deep graph cut ships too, but is not a policy)."""
-    folder = package_dir() / "checkpoints"
-    return sorted(
-        p.stem
-        for p in folder.glob("*.pt")
-        if any(line.strip() == "stage: train-ppo" for line in _lines(p.with_suffix(".yaml")))
-    )
+    import yaml
 
+    def stage(pt: Path) -> object:
+        try:
+            return (yaml.safe_load(pt.with_suffix(".yaml").read_text()) or {}).get("stage")
+        except (OSError, yaml.YAMLError, AttributeError):
+            return None
 
-def _lines(path: Path) -> list[str]:
-    try:
-        return path.read_text().splitlines()
-    except OSError:
-        return []
+    return sorted(p.stem for p in (package_dir() / "checkpoints").glob("*.pt") if stage(p) == "train-ppo")
 
 
 def policy_path(path: str | Path, method: str) -> Path:
