@@ -379,3 +379,36 @@ def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error
     ret[0, 0, 0] = float("nan")
     with pytest.raises(StafpipeError, match="train_ppo: the PPO update's losses are not finite"):
         ppo.update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0))
+
+
+@pytest.mark.parametrize("message_layers", [1, 2])
+def test_dgnn_messages_over_the_neighbour_list_are_the_dense_masked_ones(message_layers) -> None:
+    """The CPU's edge-list trunk (the training and eval path) against the dense masked form (ONNX, GPU): the same
+    outputs and gradients, with robots that have no neighbour and a world-step with none at all."""
+    from stafpipe.learning.dgnn import DGNNPolicy
+    from stafpipe.learning.features import EDGE, OWN
+
+    torch.manual_seed(3)
+    policy = DGNNPolicy(PolicyConfig(hidden=16, message_layers=message_layers))
+    own, edge = torch.randn(5, 3, 6, OWN), torch.randn(5, 3, 6, 6, EDGE)
+    mask = torch.rand(5, 3, 6, 6) < 0.35
+    mask[0, 0] = False  # no pair in this world-step
+    mask[1, 2, 4] = False  # robot 4 hears nobody
+    grads = []
+    for trunk in (policy._trunk_dense, policy._trunk_edges):
+        policy.zero_grad()
+        out = trunk(own, edge, mask)
+        (out * torch.linspace(-1, 1, out.numel()).reshape(out.shape)).sum().backward()
+        grads.append((out.detach(), [p.grad.clone() for p in policy.parameters() if p.grad is not None]))
+    (dense, dense_grads), (edges, edge_grads) = grads
+    assert dense.shape == edges.shape == (5, 3, 6, 16)
+    torch.testing.assert_close(edges, dense, rtol=1e-6, atol=1e-6)
+    assert len(dense_grads) == len(edge_grads)
+    for a, b in zip(dense_grads, edge_grads, strict=True):
+        torch.testing.assert_close(b, a, rtol=1e-5, atol=1e-6)
+    silent = policy._trunk_edges(own, edge, torch.zeros_like(mask))
+    heard = mask.any(-1)
+    assert torch.equal(silent[~heard], edges[~heard])  # a robot that hears nobody: only its own features count
+    assert not torch.isclose(silent[heard], edges[heard]).all(-1).any()  # one that hears a neighbour: they change it
+    single = policy.act(own[0, 1], edge[0, 1], mask[0, 1])  # one team, no batch axis (the controller's call)
+    torch.testing.assert_close(single, policy.actor(dense[0, 1]), rtol=1e-6, atol=1e-6)
