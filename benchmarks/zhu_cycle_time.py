@@ -14,7 +14,8 @@ import dataclasses
 
 import pandas as pd
 
-from stafpipe.controllers.zhu import ZhuConfig, ZhuController
+from stafpipe.controllers.zhu import ZhuController
+from stafpipe.controllers.zhu_config import ZhuConfig
 from stafpipe.episode import run_episode
 from stafpipe.geometry import Geometry
 from stafpipe.io import markdown_table

@@ -10,9 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from stafpipe.controllers.zhu import ZhuConfig, ZhuController
+from stafpipe.controllers.zhu import ZhuController
+from stafpipe.controllers.zhu_config import ZhuConfig
 from stafpipe.controllers.zhu_decisions import (
     StuckDetector,
+    TeamStall,
     comm_components,
     intersection_graph,
     merge_candidate,
@@ -196,6 +198,47 @@ def test_a_corridor_too_narrow_for_the_square_splits_the_team_and_it_merges_afte
     assert "regions" in kinds  # the common regions are logged for the snapshots plot
 
 
+def test_team_stall_needs_the_whole_window_far_from_p_r_without_moving() -> None:
+    stall, far, near = TeamStall(window=3.0, dp_min=0.15), 3.0, 1.0
+    team, single = (0, 1), (2,)
+    still = np.array([5.0, 0.0])
+    for t in range(3):
+        assert stall.update(float(t), {team: (still, far), single: (still, far)}, max_lag=2.5) == []
+    assert stall.update(3.0, {team: (still + 0.1, far), single: (still, far)}, max_lag=2.5) == [team]  # not one robot
+    assert stall.update(4.0, {team: (still + 0.2, far)}, max_lag=2.5) == []  # moved 0.2 m: a new window
+    assert stall.update(7.0, {team: (still + 0.2, near)}, max_lag=2.5) == []  # within max_lag of p_r: never
+    assert stall.update(9.9, {team: (still + 0.2, far)}, max_lag=2.5) == []
+    assert stall.update(10.0, {team: (still + 0.2, far)}, max_lag=2.5) == [team]
+    assert stall.update(11.0, {(0, 1, 2): (still, far)}, max_lag=2.5) == []  # other members: a new team, a new window
+
+
+def test_a_line_stalled_at_a_door_its_regions_do_not_reach_splits_and_passes() -> None:
+    # three robots abreast (2.4 m) meet a 1.5 m door in a 2 m thick wall: the outer two robots' regions end at the
+    # wall, so the common region does too, no pair of regions fails the split check, and before TeamStall the team
+    # waited at the wall for the whole episode (SR 0, no contacts)
+    spec = dataclasses.replace(
+        _open_lane(3),
+        team=TeamSpec(n=3, formation="line", spacing=1.0, start=(4.0, 0.25), goal=(22.0, 0.25), heading_deg=0.0),
+        obstacles=[
+            {"box": {"center": [12.0, -3.25], "size": [2.0, 5.5]}},
+            {"box": {"center": [12.0, 3.5], "size": [2.0, 5.0]}},
+        ],
+        world=WorldBounds(0, -6, 26, 6),
+    )
+    scenario = build_scenario(spec)
+    sr = {}
+    for stall_time in (0.0, 3.0):
+        controller = ZhuController(dataclasses.replace(ZhuConfig(), stall_time=stall_time))
+        values = run_episode(
+            scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig()
+        )
+        events = [e for e in controller.world_view(0).drain_events() if e.kind == "split"]
+        sr[stall_time] = values["sr"]
+        assert values["collisions"] == 0
+        assert all("stalled" in e.detail for e in events) and bool(events) == (stall_time > 0)
+    assert sr == {0.0: 0.0, 3.0: 1.0}
+
+
 def test_timings_per_part_are_reported() -> None:
     scenario = build_scenario(_open_lane())
     controller = ZhuController(ZhuConfig())
@@ -216,6 +259,7 @@ def test_timings_per_part_are_reported() -> None:
         ("v_min", 500.0, "larger than any region"),
         ("p_max", 0.0, "p_max"),
         ("scales", [1.5], "scales"),
+        ("stall_time", -1.0, "stall_time"),
     ],
 )
 def test_bad_settings_are_refused_with_the_key(field: str, value: object, needle: str) -> None:

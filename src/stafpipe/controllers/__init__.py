@@ -15,7 +15,7 @@ METHODS: dict[str, tuple[str, str]] = {
         "stafpipe.controllers.cezayirli:CezayirliConfig",
         "stafpipe.controllers.cezayirli:CezayirliController",
     ),
-    "zhu": ("stafpipe.controllers.zhu:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
+    "zhu": ("stafpipe.controllers.zhu_config:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
     "staf": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),
 }

@@ -22,21 +22,23 @@ import math
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
 from stafpipe.controllers.orca import orca_velocities
 from stafpipe.controllers.plan_geometry import separated
+from stafpipe.controllers.zhu_config import ZhuConfig
 from stafpipe.controllers.zhu_decisions import (
     StuckDetector,
+    TeamStall,
     comm_components,
     intersection_graph,
     merge_candidate,
     merge_requests,
     mutual_merges,
     needs_split,
+    spectral_partition,
     split_team,
 )
 from stafpipe.convex_region import (
@@ -48,127 +50,12 @@ from stafpipe.convex_region import (
     intersect_all,
     regions_from_halfplanes,
 )
-from stafpipe.errors import require
 from stafpipe.formations import assign_slots, formation_slots, rotation
 from stafpipe.geometry import capsule_arrays
 from stafpipe.sensing import Observation
 
 TIMED_PARTS = ("convex_regions", "split_check", "graph_partition", "merge_decision", "formation_control")
 """Table I's rows."""
-
-
-@dataclass
-class ZhuConfig:
-    """Config of `method=zhu` (group `method`). Defaults: Scenario 1 of Section V-A where the paper gives values."""
-
-    name: str = "zhu"
-    visibility: float = 6.0
-    """r_B, the visibility radius (Section V-A: 6 m). The communication range r_C is sensing.radius (3 m)."""
-    visibility_sides: int = 8
-    """The visibility disc is the regular polygon of this many sides inscribed in it (8: 90 % of the disc's area;
-    fewer sides keep every polygon small, which is what Table I's timings pay for)."""
-    behind: float = 1.0
-    """Ours: a region reaches at most this far (m) behind its robot, seen from p_r, so that it lies where the team is
-    going (Section II: P_i "is likely to make progress"); .inf keeps the whole visibility disc, and so does every
-    region once p_r has reached the goal."""
-    horizon: float = 3.0
-    """tau, the time horizon of the position-time obstacles (1) (Section V-A: 3 s)."""
-    decision_period: float = 1.0
-    """ff: teams check splitting and merging every ff seconds (Section V-A: 1 s)."""
-    control_period: float = 0.2
-    """Regions and target formations are recomputed at the local planner's 5 Hz (Section V-A)."""
-    v_min: float | None = None
-    """V_min (Section IV-B), m^2; null: the footprint of the team's template (hull dilated by the robot radius)."""
-    p_max: float = 3.0
-    """Largest centre distance for a merge (Section IV-C); no value printed."""
-    max_subteams: int = 4
-    """Most parts one split may make (Section III: "one splitting action can lead to multiple sub-formations")."""
-    reference_speed: float = 1.0
-    """Speed of the global reference p_r along the team's path (m/s); it waits while every team lags by > max_lag."""
-    max_lag: float = 2.5
-    """Distance (m) between p_r and the nearest team centre beyond which p_r waits (waiting for the farthest team
-    deadlocks when a subteam ahead blocks the one behind)."""
-    scales: list[float] = field(default_factory=lambda: [1.0, 0.8])
-    """Formation scales tried when fitting ([20] optimises the scale); the spacing never drops below 2 r + 0.1 m."""
-    shape_penalty: float = 1.0
-    """Cost (m) of each step down the list of shapes (preferred first, then narrower grids); the scale costs
-    shape_penalty x (1 - scale)."""
-    switch_penalty: float = 0.5
-    """Ours: extra cost (m) of a shape or scale other than the team's last one, so that a team does not flicker
-    between two near-equal formations (each change reshuffles the slots)."""
-    gain: float = 1.5
-    """Proportional gain (1/s) towards the slot; the speed is capped at the robot's preferred (max) speed."""
-    avoid_distance: float = 0.35  # local_planner=cap (base.limit_approach): gap (m) under which approach is capped
-    avoid_gain: float = 2.0  # local_planner=cap: approach speed (m/s) allowed per metre of gap beyond stop_gap
-    stop_gap: float = 0.1
-    """The gap (m) at which the approach stops (L&F uses 0.02; at 1.5 m/s and 3 m/s^2 a team that reshuffles its
-    slots needs the larger margin: Scenario 2 had 19 contacts per episode with 0.02, 9 with 0.1)."""
-    local_planner: str = "orca"
-    """Tracking the slots (Sec. III: [22]'s collision-avoiding MPC): `orca` (controllers.orca), or `cap`: the step
-    with the classical approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28 (docs/zhu.md)."""
-    target_gap: float = 0.1
-    """Ours: targets of two robots closer than 2 r + target_gap are pushed apart (as STAF's plan does); 0: off."""
-    orca_horizon: float = 1.0  # s: velocities keep every neighbour clear for this long
-    orca_margin: float = 0.1  # m, added to the robots' and obstacles' radii
-    orca_recovery: float = 0.1  # s in which two robots that touch are separated (the world's control period)
-    n_dead: int = 30
-    """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
-    dp_min: float = 0.15
-    """Delta p_min (m): least progress towards its slot over n_dead steps (Section IV-D)."""
-    stuck_near: float = 0.4
-    """Steps taken within this distance (m) of the slot do not count for stuck detection (the robot is there)."""
-
-    def check(self, key: str = "method") -> None:
-        require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)
-        require(self.behind > 0, f"{key}.behind", "must be > 0", self.behind)
-        require(self.horizon >= 0, f"{key}.horizon", "must be >= 0", self.horizon)
-        require(
-            self.decision_period > 0 and self.control_period > 0,
-            f"{key}.decision_period/control_period",
-            "must be > 0",
-            (self.decision_period, self.control_period),
-        )
-        require(self.v_min is None or self.v_min > 0, f"{key}.v_min", "must be > 0 or null", self.v_min)
-        require(self.visibility_sides >= 4, f"{key}.visibility_sides", "must be >= 4", self.visibility_sides)
-        if self.v_min is not None:  # the whole visibility polygon is the largest region a robot can have
-            k = self.visibility_sides
-            largest = 0.5 * k * self.visibility**2 * math.sin(2 * math.pi / k)
-            require(
-                self.v_min < largest,
-                f"{key}.v_min",
-                f"is larger than any region can be ({largest:.1f} m^2 "
-                f"for visibility {self.visibility:g} m): the team would split at once and never merge",
-                self.v_min,
-            )
-        require(self.p_max > 0, f"{key}.p_max", "must be > 0", self.p_max)
-        require(
-            self.local_planner in ("orca", "cap"), f"{key}.local_planner", "must be orca or cap", self.local_planner
-        )
-        require(
-            self.orca_horizon > 0 and self.orca_recovery > 0 and self.orca_margin >= 0 and self.target_gap >= 0,
-            f"{key}.orca_horizon/orca_recovery/orca_margin/target_gap",
-            "must be > 0 / > 0 / >= 0 / >= 0",
-            (self.orca_horizon, self.orca_recovery, self.orca_margin, self.target_gap),
-        )
-        require(self.max_subteams >= 2, f"{key}.max_subteams", "must be >= 2", self.max_subteams)
-        require(
-            self.reference_speed > 0 and self.max_lag > 0,
-            f"{key}.reference_speed/max_lag",
-            "must be > 0",
-            (self.reference_speed, self.max_lag),
-        )
-        require(
-            len(self.scales) > 0 and all(0 < s <= 1 for s in self.scales),
-            f"{key}.scales",
-            "need values in (0, 1]",
-            self.scales,
-        )
-        require(
-            self.n_dead >= 1 and self.dp_min > 0,
-            f"{key}.n_dead/dp_min",
-            "must be >= 1 and > 0",
-            (self.n_dead, self.dp_min),
-        )
 
 
 def grid_slots(m: int, across: int, spacing: float) -> np.ndarray:
@@ -210,6 +97,7 @@ class ZhuController(Controller):
         self.common: dict[int, Region] = {}
         self.timings: dict[str, list[float]] = {p: [] for p in TIMED_PARTS}
         self.stuck = StuckDetector(self.n, cfg.n_dead, cfg.dp_min, cfg.stuck_near)
+        self.stall = TeamStall(cfg.stall_time, cfg.dp_min)
         for m in range(1, self.n + 1):  # templates, hulls and V_min of every team size, before the clock runs
             self.v_min(m)
             for shape in self.shapes(m):
@@ -305,7 +193,7 @@ class ZhuController(Controller):
             decided = t + 1e-9 >= self.next_decision
             if decided:
                 self.next_decision += cfg.decision_period
-                self._decide(p, comm)
+                self._decide(p, comm, t)
             with self._timed("formation_control"):
                 self._formation_control(p)
             if decided:  # the teams' common regions, for `stafpipe plot regions` (Zhu Fig. 4), to the centimetre
@@ -358,7 +246,7 @@ class ZhuController(Controller):
         for k, members in self.teams.items():
             self._subteams[members] = k
 
-    def _decide(self, p: np.ndarray, comm: np.ndarray) -> None:
+    def _decide(self, p: np.ndarray, comm: np.ndarray, t: float) -> None:
         # communication loss (Section IV-D): robots a team's flooding did not reach within d rounds are discarded
         for k in list(self.teams):
             parts = comm_components(comm, self.teams[k])
@@ -367,7 +255,10 @@ class ZhuController(Controller):
                 for part in parts[1:]:
                     self._new_team(part)
                     self.emit("comm_loss", part, f"not heard by team {k} within its consensus rounds")
-        # split check and partition (Algorithm 1)
+        ref, _ = self.reference()
+        at = {tuple(m): (c := p[m].mean(axis=0), float(np.linalg.norm(c - ref))) for m in self.teams.values()}
+        stalled = self.stall.update(t, at, self.cfg.max_lag) if self.cfg.stall_time > 0 else []
+        # split check and partition (Algorithm 1); a stalled team splits in two by the same partition (TeamStall)
         for k in list(self.teams):
             members = self.teams[k]
             if len(members) < 2:
@@ -375,18 +266,21 @@ class ZhuController(Controller):
             with self._timed("split_check"):
                 a = intersection_graph([self.regions[i] for i in members])
                 split = needs_split(a, self.v_min(len(members)))
-            if split:
+            if split or tuple(members) in stalled:
                 with self._timed("graph_partition"):
                     v_of = {m: self.v_min(m) for m in range(1, len(members) + 1)}
-                    labels = split_team(a, v_of, self.cfg.max_subteams)
+                    labels = split_team(a, v_of, self.cfg.max_subteams) if split else spectral_partition(a, 2)
                 groups = [[members[i] for i in np.flatnonzero(labels == g)] for g in range(labels.max() + 1)]
                 self.teams[k] = groups[0]
                 for g in groups[1:]:
                     self._new_team(g)
+                why = "" if split else f"stalled {self.cfg.stall_time:g} s over {self.cfg.max_lag:g} m from p_r; "
+                if not split:  # its parts rejoin only once they move, as a stuck robot does (else at once: same place)
+                    self._held.update({i: p[i].copy() for i in members})
                 self.emit(
                     "split",
                     sorted(members),
-                    f"A_a min {a[~np.eye(len(a), dtype=bool)].min():.2f} < "
+                    f"{why}A_a min {a[~np.eye(len(a), dtype=bool)].min():.2f} {'<' if split else '>='} "
                     f"V_min {self.v_min(len(members)):.2f}; parts {groups}",
                 )
         self._sync_subteams()

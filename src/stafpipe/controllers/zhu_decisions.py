@@ -158,3 +158,30 @@ class StuckDetector:
             h.append(float(progress[i]))
             flags[i] = len(h) == self.n_dead and sum(h) < self.dp_min
         return flags
+
+
+class TeamStall:
+    """Ours, a guard against the deadlock Zhu et al. (ICRA 2019) warn of in Sec. VI ("deadlocks may still occur"): a
+    team of robots lined up before a gap whose regions all end at the wall beside it fits its formation at the wall
+    and never fails Algorithm 1's split check (every pair of regions overlaps widely before the wall). Sec. IV-D's
+    stuck rule, read for a team: a team whose centre stays more than `max_lag` from p_r and moves less than Delta
+    p_min in `window` seconds is stalled, and splits (docs/zhu.md). Keyed by the team's members, so a team that
+    splits or merges starts a new window."""
+
+    def __init__(self, window: float, dp_min: float):
+        self.window, self.dp_min = window, dp_min
+        self.since: dict[tuple[int, ...], tuple[float, np.ndarray]] = {}  # members -> (window start, centre then)
+
+    def update(
+        self, t: float, teams: dict[tuple[int, ...], tuple[np.ndarray, float]], max_lag: float
+    ) -> list[tuple[int, ...]]:
+        """Record each team's centre and distance from p_r at time t; the teams of two or more robots stalled."""
+        self.since = {members: self.since[members] for members in teams if members in self.since}
+        stalled = []
+        for members, (centre, lag) in teams.items():
+            start, then = self.since.setdefault(members, (t, centre))
+            if lag <= max_lag or np.linalg.norm(centre - then) >= self.dp_min:  # near p_r, or moving: a new window
+                self.since[members] = (t, centre)
+            elif t - start >= self.window - 1e-9 and len(members) > 1:
+                stalled.append(members)
+        return stalled

@@ -28,7 +28,7 @@ from stafpipe.controllers.base import STOP_GAP, limit_approach
 from stafpipe.controllers.lf import LFConfig
 from stafpipe.controllers.orca import orca_velocities
 from stafpipe.controllers.plan_config import PlanConfig
-from stafpipe.controllers.zhu import ZhuConfig
+from stafpipe.controllers.zhu_config import ZhuConfig
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 

@@ -1,0 +1,126 @@
+"""Settings of `method=zhu` (Zhu, Juhl, Ferranti and Alonso-Mora, ICRA 2019), checked before any work; the
+controller is controllers/zhu.py."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from stafpipe.errors import require
+
+
+@dataclass
+class ZhuConfig:
+    """Config of `method=zhu` (group `method`). Defaults: Scenario 1 of Section V-A where the paper gives values."""
+
+    name: str = "zhu"
+    visibility: float = 6.0
+    """r_B, the visibility radius (Section V-A: 6 m). The communication range r_C is sensing.radius (3 m)."""
+    visibility_sides: int = 8
+    """The visibility disc is the regular polygon of this many sides inscribed in it (8: 90 % of the disc's area;
+    fewer sides keep every polygon small, which is what Table I's timings pay for)."""
+    behind: float = 1.0
+    """Ours: a region reaches at most this far (m) behind its robot, seen from p_r, so that it lies where the team is
+    going (Section II: P_i "is likely to make progress"); .inf keeps the whole visibility disc, and so does every
+    region once p_r has reached the goal."""
+    horizon: float = 3.0
+    """tau, the time horizon of the position-time obstacles (1) (Section V-A: 3 s)."""
+    decision_period: float = 1.0
+    """ff: teams check splitting and merging every ff seconds (Section V-A: 1 s)."""
+    control_period: float = 0.2
+    """Regions and target formations are recomputed at the local planner's 5 Hz (Section V-A)."""
+    v_min: float | None = None
+    """V_min (Section IV-B), m^2; null: the footprint of the team's template (hull dilated by the robot radius)."""
+    p_max: float = 3.0
+    """Largest centre distance for a merge (Section IV-C); no value printed."""
+    max_subteams: int = 4
+    """Most parts one split may make (Section III: "one splitting action can lead to multiple sub-formations")."""
+    reference_speed: float = 1.0
+    """Speed of the global reference p_r along the team's path (m/s); it waits while every team lags by > max_lag."""
+    max_lag: float = 2.5
+    """Distance (m) between p_r and the nearest team centre beyond which p_r waits (waiting for the farthest team
+    deadlocks when a subteam ahead blocks the one behind)."""
+    scales: list[float] = field(default_factory=lambda: [1.0, 0.8])
+    """Formation scales tried when fitting ([20] optimises the scale); the spacing never drops below 2 r + 0.1 m."""
+    shape_penalty: float = 1.0
+    """Cost (m) of each step down the list of shapes (preferred first, then narrower grids); the scale costs
+    shape_penalty x (1 - scale)."""
+    switch_penalty: float = 0.5
+    """Ours: extra cost (m) of a shape or scale other than the team's last one, so that a team does not flicker
+    between two near-equal formations (each change reshuffles the slots)."""
+    gain: float = 1.5
+    """Proportional gain (1/s) towards the slot; the speed is capped at the robot's preferred (max) speed."""
+    avoid_distance: float = 0.35  # local_planner=cap (base.limit_approach): gap (m) under which approach is capped
+    avoid_gain: float = 2.0  # local_planner=cap: approach speed (m/s) allowed per metre of gap beyond stop_gap
+    stop_gap: float = 0.1
+    """The gap (m) at which the approach stops (L&F uses 0.02; at 1.5 m/s and 3 m/s^2 a team that reshuffles its
+    slots needs the larger margin: Scenario 2 had 19 contacts per episode with 0.02, 9 with 0.1)."""
+    local_planner: str = "orca"
+    """Tracking the slots (Sec. III: [22]'s collision-avoiding MPC): `orca` (controllers.orca), or `cap`: the step
+    with the classical approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28 (docs/zhu.md)."""
+    target_gap: float = 0.1
+    """Ours: targets of two robots closer than 2 r + target_gap are pushed apart (as STAF's plan does); 0: off."""
+    orca_horizon: float = 1.0  # s: velocities keep every neighbour clear for this long
+    orca_margin: float = 0.1  # m, added to the robots' and obstacles' radii
+    orca_recovery: float = 0.1  # s in which two robots that touch are separated (the world's control period)
+    n_dead: int = 30
+    """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
+    dp_min: float = 0.15
+    """Delta p_min (m): least progress towards its slot over n_dead steps (Section IV-D)."""
+    stuck_near: float = 0.4
+    """Steps taken within this distance (m) of the slot do not count for stuck detection (the robot is there)."""
+    stall_time: float = 3.0
+    """Ours (`zhu_decisions.TeamStall`): a team that stays over max_lag from p_r and moves less than dp_min in
+    this many seconds splits in two; 0: off, as until 2026-12-06. 3 s: the n_dead steps of a stuck robot."""
+
+    def check(self, key: str = "method") -> None:
+        require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)
+        require(self.behind > 0, f"{key}.behind", "must be > 0", self.behind)
+        require(self.horizon >= 0, f"{key}.horizon", "must be >= 0", self.horizon)
+        require(
+            self.decision_period > 0 and self.control_period > 0,
+            f"{key}.decision_period/control_period",
+            "must be > 0",
+            (self.decision_period, self.control_period),
+        )
+        require(self.v_min is None or self.v_min > 0, f"{key}.v_min", "must be > 0 or null", self.v_min)
+        require(self.visibility_sides >= 4, f"{key}.visibility_sides", "must be >= 4", self.visibility_sides)
+        if self.v_min is not None:  # the whole visibility polygon is the largest region a robot can have
+            k = self.visibility_sides
+            largest = 0.5 * k * self.visibility**2 * math.sin(2 * math.pi / k)
+            require(
+                self.v_min < largest,
+                f"{key}.v_min",
+                f"is larger than any region can be ({largest:.1f} m^2 "
+                f"for visibility {self.visibility:g} m): the team would split at once and never merge",
+                self.v_min,
+            )
+        require(self.p_max > 0, f"{key}.p_max", "must be > 0", self.p_max)
+        require(
+            self.local_planner in ("orca", "cap"), f"{key}.local_planner", "must be orca or cap", self.local_planner
+        )
+        require(
+            self.orca_horizon > 0 and self.orca_recovery > 0 and self.orca_margin >= 0 and self.target_gap >= 0,
+            f"{key}.orca_horizon/orca_recovery/orca_margin/target_gap",
+            "must be > 0 / > 0 / >= 0 / >= 0",
+            (self.orca_horizon, self.orca_recovery, self.orca_margin, self.target_gap),
+        )
+        require(self.max_subteams >= 2, f"{key}.max_subteams", "must be >= 2", self.max_subteams)
+        require(
+            self.reference_speed > 0 and self.max_lag > 0,
+            f"{key}.reference_speed/max_lag",
+            "must be > 0",
+            (self.reference_speed, self.max_lag),
+        )
+        require(
+            len(self.scales) > 0 and all(0 < s <= 1 for s in self.scales),
+            f"{key}.scales",
+            "need values in (0, 1]",
+            self.scales,
+        )
+        require(
+            self.n_dead >= 1 and self.dp_min > 0 and self.stall_time >= 0,
+            f"{key}.n_dead/dp_min/stall_time",
+            "must be >= 1, > 0 and >= 0",
+            (self.n_dead, self.dp_min, self.stall_time),
+        )
