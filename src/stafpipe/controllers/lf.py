@@ -5,9 +5,10 @@ in the team while maintaining the formation". No subteaming and no formation ada
 Leader: the robot in the formation's front slot; it follows its own shortest collision-free path on the map (the
 harness' grid planner, clearance = robot radius + `clearance_margin`) at a speed that drops while followers lag.
 Followers: each tracks its slot = leader position + R(path heading) (slot_i - slot_leader), the formation rotated to the
-direction the leader moves, with a proportional gain. Towards robots and obstacles
-closer than `avoid_distance` the approach speed is capped in proportion to the gap (collision avoidance), then the
-drive caps the speed.
+direction the leader moves, with a proportional gain. Collision avoidance (`local_planner`): for holonomic robots
+ORCA makes the control law's velocities collision-free (controllers/orca.py, as method=zhu's); for differential
+drive, whose motion is not the velocity ORCA chose, the approach speed towards robots and obstacles closer than
+`avoid_distance` is capped in proportion to the gap. Then the drive caps the speed.
 """
 
 from __future__ import annotations
@@ -19,9 +20,14 @@ from typing import cast
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
+from stafpipe.controllers.orca import orca_velocities
+from stafpipe.controllers.zhu_config import ZhuConfig
+from stafpipe.errors import require
 from stafpipe.formations import rotation
 from stafpipe.geometry import Geometry, point_ahead
 from stafpipe.sensing import Observation
+
+_ZHU = ZhuConfig()
 
 
 @dataclass
@@ -41,6 +47,10 @@ class LFConfig:
     """Allowed approach speed (m/s) per metre of gap left (minus 0.02 m)."""
     clearance_margin: float = 0.1
     """Added to the robot radius as the leader path's clearance from obstacles (m)."""
+    local_planner: str = "auto"
+    """Collision avoidance: `orca` (ORCA, controllers/orca.py, with method=zhu's horizon 1 s, margin 0.1 m and
+    recovery 0.1 s), `cap` (the approach cap above; every robot until 2026-12-06), or `auto`: ORCA for holonomic
+    robots, the cap for differential drive (docs/baselines.md has both measured on either drive)."""
 
 
 class LFController(Controller):
@@ -48,12 +58,16 @@ class LFController(Controller):
 
     def __init__(self, cfg: LFConfig) -> None:
         super().__init__()
+        lp = cfg.local_planner
+        require(lp in ("auto", "orca", "cap"), "method.local_planner", "must be auto, orca or cap", lp)
         self.cfg = cfg
 
     def reset(self, team: TeamInfo) -> None:
         super().reset(team)
         spec = team.scenario.spec
         self.radius, self.max_speed = spec.robot.radius, spec.robot.max_speed
+        lp = self.cfg.local_planner
+        self.orca = lp == "orca" or (lp == "auto" and spec.robot.drive == "holonomic")
         # slots in the team's frame, with robot i at slot i (the harness places robot i on slot i of the template)
         self.slots = team.template - team.template.mean(axis=0)
         self.leader = int(self.slots[:, 0].argmax())
@@ -67,7 +81,12 @@ class LFController(Controller):
         self.lead_heard = np.array(team.start[self.leader], dtype=float)
 
     def act(self, obs: Observation) -> np.ndarray:
-        return limit_approach(self._command(obs), obs, self.radius, self.cfg.avoid_distance, self.cfg.avoid_gain)
+        v = self._command(obs)
+        if self.orca:  # method=zhu's ORCA settings
+            return orca_velocities(
+                v, obs, self.radius, self.max_speed, _ZHU.orca_horizon, _ZHU.orca_recovery, _ZHU.orca_margin
+            )
+        return limit_approach(v, obs, self.radius, self.cfg.avoid_distance, self.cfg.avoid_gain)
 
     def act_worlds(self, obs: Observation, active: np.ndarray) -> np.ndarray:
         """As `act` in every active world, the collision avoidance of all of them in one call (world by world it was
@@ -78,7 +97,7 @@ class LFController(Controller):
             return out
         copies = [cast(LFController, self._worlds[w]) for w in worlds.tolist()]
         radii = {c.radius for c in copies}
-        if len(radii) > 1:  # robots of different sizes in one batch: world by world
+        if len(radii) > 1 or any(c.orca for c in copies):  # other sizes in one batch, or ORCA: world by world
             return super().act_worlds(obs, active)
         v = np.stack([c._command(obs.world(w)) for c, w in zip(copies, worlds.tolist(), strict=True)])
         batch = Observation(*(x[worlds] for x in obs))
