@@ -3,6 +3,7 @@ start, the hand-made low levels of the ablation, and training on generated map d
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import math
 import re
@@ -27,6 +28,7 @@ from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
 from stafpipe.learning.teachers import AVOID_GAIN, SLIDE_MARGIN, off_the_wall, teacher_actions
+from stafpipe.scenario import TeamSpec, WorldBounds, build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig, Worlds
@@ -42,6 +44,33 @@ def test_trainer_has_no_method_name_branches() -> None:
 def _team(sc, worlds: Worlds, w: int = 0) -> TeamInfo:
     ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
     return TeamInfo(sc, worlds.pos[w].copy(), worlds.goal[w].copy(), sc.template(), path, ctx.passage_width)
+
+
+def test_dgnn_is_guided_through_the_middle_of_a_passage_its_shortest_path_hugs() -> None:
+    """A 45-degree corridor whose goal lies beyond its upper wall's end: the shortest path (TeamInfo.path) runs one
+    radius from that wall, and DGNN guided along it slid on the wall (178 contacts an episode); the adapter guides
+    along the centred path, which keeps near half the passage from both walls."""
+    spec = dataclasses.replace(
+        load_named_scenario("corridor").spec,
+        world=WorldBounds(0, 0, 34, 34),
+        obstacles=[
+            {"polygon": [[8, 4], [26, 22], [26, 34], [0, 34], [0, 12]]},
+            {"polygon": [[11, 0], [34, 0], [34, 19], [28.5, 20.5], [10.5, 2.5]]},
+        ],
+        team=TeamSpec(n=8, formation="wedge", spacing=1.0, start=(4.0, 4.0), goal=(30.0, 28.0), heading_deg=45.0),
+    )
+    sc = build_scenario(spec)
+    worlds = Worlds([sc], SensingConfig())
+    worlds.reset([0])
+    team = _team(sc, worlds)
+    adapter = ADAPTERS["dgnn"](PolicyConfig(), TrainPPOConfig().reward, None, 2.0)
+    adapter.begin([team])
+    geometry = Geometry.of(sc)
+    inside = lambda path: path[(path[:, 0] > 12) & (path[:, 0] < 24)]  # noqa: E731  (within the corridor)
+    shortest = geometry.clearance(inside(team.path)).min()
+    guided = geometry.clearance(inside(adapter.paths[0])).min()
+    assert shortest < sc.spec.robot.radius + 0.05  # the shortest path grazes the wall at one radius
+    assert guided > team.passage_width / 2 - 0.1  # the guide keeps to the middle: 1.41 m from either wall
 
 
 @pytest.mark.parametrize("method", ["dgnn", "staf"])

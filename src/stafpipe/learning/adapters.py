@@ -44,6 +44,18 @@ class Adapter:
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: PlanConfig | None, sensing_radius: float):
         self.policy, self.reward_cfg, self.plan_cfg, self.sensing_radius = policy, reward, plan, sensing_radius
         self.teams: list[TeamInfo] = []
+        self._paths: list[tuple[object, np.ndarray]] = []  # (scenario, its centred path), by identity
+
+    def centred(self, team: TeamInfo) -> np.ndarray:
+        """The path through the middle of the passages (episode.centred_path), computed once per scenario."""
+        from stafpipe.episode import centred_path
+        from stafpipe.geometry import Geometry
+
+        for scenario, path in self._paths:
+            if scenario is team.scenario:
+                return path
+        self._paths.append((team.scenario, centred_path(team.scenario, Geometry.of(team.scenario), team.passage_width)))
+        return self._paths[-1][1]
 
     def begin(self, teams: list[TeamInfo], privileged: bool = False) -> None:
         """Start one episode in each of B worlds; `privileged`: `teacher_aim` may see more than the network."""
@@ -81,11 +93,18 @@ class Adapter:
 
 
 class DGNNAdapter(Adapter):
-    """DGNN (Blumenkamp et al., ICRA 2022): each robot drives to its own goal slot, guided along the team's shortest
-    path (`policy.guide=path`); navigation and contact rewards only."""
+    """DGNN (Blumenkamp et al., ICRA 2022): each robot drives to its own goal slot, guided along the path through the
+    middle of the passages (`policy.guide=path`; the path STAF's plan centres its subteams on); navigation and contact
+    rewards only."""
 
     name = "dgnn"
     network = DGNNPolicy
+
+    def begin(self, teams: list[TeamInfo], privileged: bool = False) -> None:
+        super().begin(teams)
+        # the centred path, not TeamInfo.path (the shortest, one radius from the walls): guided along a shortest path
+        # that hugs a wall, robots slid on it (docs/learning.md, "The guide path")
+        self.paths = [self.centred(t) for t in teams] if self.policy.guide == "path" else []
 
     def step(self, obs: Observation, dt: float) -> Step:
         pc = self.policy
@@ -93,11 +112,11 @@ class DGNNAdapter(Adapter):
         if pc.guide == "path":  # worlds that share a path are guided in one call (each robot independently)
             target = np.empty_like(goal)
             groups: dict[int, list[int]] = {}
-            for w, t in enumerate(self.teams):
-                groups.setdefault(id(t.path), []).append(w)
+            for w, path in enumerate(self.paths):
+                groups.setdefault(id(path), []).append(w)
             for ws in groups.values():
                 pos, own_goal = obs.position[ws].reshape(-1, 2), goal[ws].reshape(-1, 2)
-                guided = guide_targets(pos, own_goal, self.teams[ws[0]].path, pc.lookahead, pc.release)
+                guided = guide_targets(pos, own_goal, self.paths[ws[0]], pc.lookahead, pc.release)
                 target[ws] = guided.reshape(len(ws), -1, 2)
         else:
             target = goal
@@ -123,18 +142,6 @@ class StafAdapter(Adapter):
         super().__init__(policy, reward, plan or PlanConfig(), sensing_radius)
         self.divide = divider(self.plan_cfg.high_checkpoint)  # App. B.1: the high level is trained first, then fixed
         self.plans: list[StafPlan] = []
-        self._paths: list[tuple[object, np.ndarray]] = []  # (scenario, its centred path), by identity
-
-    def _centred(self, team: TeamInfo) -> np.ndarray:
-        """The path through the middle of the passages (episode.centred_path), computed once per scenario."""
-        from stafpipe.episode import centred_path
-        from stafpipe.geometry import Geometry
-
-        for scenario, path in self._paths:
-            if scenario is team.scenario:
-                return path
-        self._paths.append((team.scenario, centred_path(team.scenario, Geometry.of(team.scenario), team.passage_width)))
-        return self._paths[-1][1]
 
     def begin(self, teams: list[TeamInfo], privileged: bool = False) -> None:
         """`privileged` with `plan.adapt=nominal` (`train_ppo.imitation.privileged`): shadow plans with the geometric
@@ -143,14 +150,14 @@ class StafAdapter(Adapter):
         super().begin(teams)
         self._diff_drive = np.array([t.scenario.spec.robot.drive == "diff_drive" for t in teams])
         self.plans = [
-            StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)
+            StafPlan(self.plan_cfg, t.scenario, t.template, t.goal, self.centred(t), t.passage_width, self.divide)
             for t in teams
         ]
         shadow = dataclasses.replace(self.plan_cfg, adapt="geometric")
         privileged = privileged and self.plan_cfg.adapt != "geometric"  # else the teacher's aim is the plan's own
         self.shadows = (
             [
-                StafPlan(shadow, t.scenario, t.template, t.goal, self._centred(t), t.passage_width, self.divide)
+                StafPlan(shadow, t.scenario, t.template, t.goal, self.centred(t), t.passage_width, self.divide)
                 for t in teams
             ]
             if privileged

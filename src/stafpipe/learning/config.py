@@ -48,7 +48,8 @@ class PolicyConfig:
     goal_clip: float = 5.0
     """The target vector is clipped to this length (m) before it enters the network."""
     guide: str = "path"
-    """Target: `goal` (straight to the robot's own goal) or `path` (ahead on the team's shortest path; features.py)."""
+    """Target: `goal` (straight to the robot's own goal) or `path` (ahead on the path through the middle of the
+    passages, episode.centred_path, since 2026-12-06; the team's shortest path before; features.py)."""
     lookahead: float = 2.0
     """guide=path: how far ahead on the path the target lies (m)."""
     release: float = 4.0
