@@ -68,6 +68,7 @@ class LFController(Controller):
         self.radius, self.max_speed = spec.robot.radius, spec.robot.max_speed
         lp = self.cfg.local_planner
         self.orca = lp == "orca" or (lp == "auto" and spec.robot.drive == "holonomic")
+        self.mover_radius = np.array([m.radius for m in spec.moving_obstacles])  # ORCA avoids them too
         # slots in the team's frame, with robot i at slot i (the harness places robot i on slot i of the template)
         self.slots = team.template - team.template.mean(axis=0)
         self.leader = int(self.slots[:, 0].argmax())
@@ -84,7 +85,14 @@ class LFController(Controller):
         v = self._command(obs)
         if self.orca:  # method=zhu's ORCA settings
             return orca_velocities(
-                v, obs, self.radius, self.max_speed, _ZHU.orca_horizon, _ZHU.orca_recovery, _ZHU.orca_margin
+                v,
+                obs,
+                self.radius,
+                self.max_speed,
+                _ZHU.orca_horizon,
+                _ZHU.orca_recovery,
+                _ZHU.orca_margin,
+                self.mover_radius,
             )
         return limit_approach(v, obs, self.radius, self.cfg.avoid_distance, self.cfg.avoid_gain)
 
