@@ -239,6 +239,23 @@ def test_a_line_stalled_at_a_door_its_regions_do_not_reach_splits_and_passes() -
     assert sr == {0.0: 0.0, 3.0: 1.0}
 
 
+def test_a_team_spaced_tighter_than_the_shrink_floor_keeps_its_spacing() -> None:
+    # spacing 0.4 m = the robots' diameter: below 2 r + 0.1 m no scale of the template is allowed, and the fit had
+    # no candidate at all (a crash); now the template keeps its own spacing
+    spec = dataclasses.replace(_open_lane(), team=dataclasses.replace(_open_lane().team, spacing=0.4))
+    scenario = build_scenario(spec)
+    values = run_episode(
+        scenario,
+        Geometry(scenario, resolution=0.1),
+        ZhuController(ZhuConfig()),
+        "zhu",
+        0,
+        WorldConfig(),
+        SensingConfig(),
+    )
+    assert values["sr"] == 1.0
+
+
 def test_timings_per_part_are_reported() -> None:
     scenario = build_scenario(_open_lane())
     controller = ZhuController(ZhuConfig())

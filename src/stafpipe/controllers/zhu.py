@@ -373,11 +373,12 @@ class ZhuController(Controller):
         finite set of candidates)."""
         rot = rotation(heading)
         min_scale = (2 * self.radius + 0.1) / self.spacing
+        # scales that keep 0.1 m between robots; a team spaced tighter than that keeps its own spacing (no shrinking)
+        scales = [s for s in self.cfg.scales if m == 1 or s >= min_scale] or [max(self.cfg.scales)]
         options = [
             (rank, scale, scale * shape @ rot.T, scale * self._hull(shape) @ rot.T)
             for rank, shape in enumerate(self.shapes(m))
-            for scale in self.cfg.scales
-            if m == 1 or scale >= min_scale
+            for scale in scales
         ]
         centres = fit_centres(region, [hull for *_, hull in options], ref)
         best, best_cost, choice = None, math.inf, None
