@@ -256,6 +256,26 @@ def test_a_team_spaced_tighter_than_the_shrink_floor_keeps_its_spacing() -> None
     assert values["sr"] == 1.0
 
 
+def test_the_whole_team_at_its_goal_takes_its_goal_slots_without_splitting_again() -> None:
+    # a circle of 20 whose goal is 5 m from the world's edge: there the robots' regions overlap less than the
+    # circle's V_min, so the split check split the team once it was home and it never took its goal slots (SR 0)
+    spec = ScenarioConfig(
+        name="edge",
+        world=WorldBounds(0, 0, 24, 16),
+        obstacles=[],
+        team=TeamSpec(n=20, formation="circle", spacing=1.0, start=(5.0, 8.0), goal=(19.0, 8.0), heading_deg=0.0),
+        time_limit=60.0,
+    )
+    scenario = build_scenario(spec)
+    controller = ZhuController(ZhuConfig())
+    values = run_episode(
+        scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig()
+    )
+    kinds = [e.kind for e in controller.world_view(0).drain_events() if e.kind != "regions"]
+    assert values["sr"] == 1.0
+    assert kinds[-1] == "merge"  # split on the way (the team is wider than its regions' overlap), merged, home
+
+
 def test_timings_per_part_are_reported() -> None:
     scenario = build_scenario(_open_lane())
     controller = ZhuController(ZhuConfig())

@@ -259,9 +259,10 @@ class ZhuController(Controller):
         at = {tuple(m): (c := p[m].mean(axis=0), float(np.linalg.norm(c - ref))) for m in self.teams.values()}
         stalled = self.stall.update(t, at, self.cfg.max_lag) if self.cfg.stall_time > 0 else []
         # split check and partition (Algorithm 1); a stalled team splits in two by the same partition (TeamStall)
+        home = self.s_ref >= self.cum[-1] - 1e-9  # p_r at the goal: the whole team takes its goal slots, never splits
         for k in list(self.teams):
             members = self.teams[k]
-            if len(members) < 2:
+            if len(members) < 2 or (home and len(members) == self.n):
                 continue
             with self._timed("split_check"):
                 a = intersection_graph([self.regions[i] for i in members])
