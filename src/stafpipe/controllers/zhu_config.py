@@ -41,7 +41,8 @@ class ZhuConfig:
     """Distance (m) between p_r and the nearest team centre beyond which p_r waits (waiting for the farthest team
     deadlocks when a subteam ahead blocks the one behind)."""
     scales: list[float] = field(default_factory=lambda: [1.0, 0.8])
-    """Formation scales tried when fitting ([20] optimises the scale); the spacing never drops below 2 r + 0.1 m."""
+    """Formation scales tried when fitting ([20] optimises the scale); a scale never takes the spacing below 2 r +
+    0.1 m, and a team spaced tighter than that keeps its own spacing."""
     shape_penalty: float = 1.0
     """Cost (m) of each step down the list of shapes (preferred first, then narrower grids); the scale costs
     shape_penalty x (1 - scale)."""
