@@ -21,13 +21,11 @@ import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
 from stafpipe.controllers.orca import orca_velocities
-from stafpipe.controllers.zhu_config import ZhuConfig
+from stafpipe.controllers.zhu_config import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY
 from stafpipe.errors import require
 from stafpipe.formations import rotation
 from stafpipe.geometry import Geometry, point_ahead
 from stafpipe.sensing import Observation
-
-_ZHU = ZhuConfig()
 
 
 @dataclass
@@ -52,22 +50,26 @@ class LFConfig:
     recovery 0.1 s), `cap` (the approach cap above; every robot until 2026-12-06), or `auto`: ORCA for holonomic
     robots, the cap for differential drive (docs/baselines.md has both measured on either drive)."""
 
+    def check(self, key: str = "method") -> None:
+        lp = self.local_planner
+        require(lp in ("auto", "orca", "cap"), f"{key}.local_planner", "must be auto, orca or cap", lp)
+
 
 class LFController(Controller):
     """Leader-follower formation control with collision avoidance."""
 
     def __init__(self, cfg: LFConfig) -> None:
         super().__init__()
-        lp = cfg.local_planner
-        require(lp in ("auto", "orca", "cap"), "method.local_planner", "must be auto, orca or cap", lp)
+        cfg.check()
         self.cfg = cfg
 
     def reset(self, team: TeamInfo) -> None:
         super().reset(team)
         spec = team.scenario.spec
         self.radius, self.max_speed = spec.robot.radius, spec.robot.max_speed
-        lp = self.cfg.local_planner
-        self.orca = lp == "orca" or (lp == "auto" and spec.robot.drive == "holonomic")
+        self.orca = self.cfg.local_planner == "orca" or (
+            self.cfg.local_planner == "auto" and spec.robot.drive == "holonomic"
+        )
         self.mover_radius = np.array([m.radius for m in spec.moving_obstacles])  # ORCA avoids them too
         # slots in the team's frame, with robot i at slot i (the harness places robot i on slot i of the template)
         self.slots = team.template - team.template.mean(axis=0)
@@ -89,9 +91,9 @@ class LFController(Controller):
                 obs,
                 self.radius,
                 self.max_speed,
-                _ZHU.orca_horizon,
-                _ZHU.orca_recovery,
-                _ZHU.orca_margin,
+                ORCA_HORIZON,
+                ORCA_RECOVERY,
+                ORCA_MARGIN,
                 self.mover_radius,
             )
         return limit_approach(v, obs, self.radius, self.cfg.avoid_distance, self.cfg.avoid_gain)

@@ -127,6 +127,10 @@ class ZhuController(Controller):
         self._ref = (self.s_ref, self.path[j] + (s - self.cum[j]) / length * d, math.atan2(d[1], d[0]))
         return self._ref[1], self._ref[2]
 
+    def _at_goal(self) -> bool:
+        """p_r has reached the end of the team's path."""
+        return self.s_ref >= self.cum[-1] - 1e-9
+
     def shapes(self, m: int) -> list[np.ndarray]:
         """The template formations a team of m robots may take, preferred first (Section II: "a predefined set of
         default formations ... known by all robots"): the scenario's formation, then grids two wide and one wide."""
@@ -172,7 +176,7 @@ class ZhuController(Controller):
         ahead = ref - obs.position
         ahead /= np.maximum(np.linalg.norm(ahead, axis=1, keepdims=True), 1e-9)
         # once p_r has reached the goal there is no "ahead" left: the teams regroup round it in whole discs
-        behind = math.inf if self.s_ref >= self.cum[-1] - 1e-9 else self.cfg.behind
+        behind = math.inf if self._at_goal() else self.cfg.behind
         return regions_from_halfplanes(
             grow_halfplanes(
                 obs.position, a, b, r, self.cfg.visibility, self.radius, ahead, behind, self.cfg.visibility_sides
@@ -259,7 +263,7 @@ class ZhuController(Controller):
         at = {tuple(m): (c := p[m].mean(axis=0), float(np.linalg.norm(c - ref))) for m in self.teams.values()}
         stalled = self.stall.update(t, at, self.cfg.max_lag) if self.cfg.stall_time > 0 else []
         # split check and partition (Algorithm 1); a stalled team splits in two by the same partition (TeamStall)
-        home = self.s_ref >= self.cum[-1] - 1e-9  # p_r at the goal: the whole team takes its goal slots, never splits
+        home = self._at_goal()  # the whole team then takes its goal slots (_formation_control) and never splits
         for k in list(self.teams):
             members = self.teams[k]
             if len(members) < 2 or (home and len(members) == self.n):
@@ -323,7 +327,7 @@ class ZhuController(Controller):
     # ---- local formation control (Section III) ---------------------------------------------------------------------
     def _formation_control(self, p: np.ndarray) -> None:
         ref, heading = self.reference()
-        at_end = self.s_ref >= self.cum[-1] - 1e-9
+        at_end = self._at_goal()
         ids = list(self.teams)
         self.common = dict(
             zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True)

@@ -8,6 +8,11 @@ from dataclasses import dataclass, field
 
 from stafpipe.errors import require
 
+# ORCA's settings (controllers/orca.py) as method=zhu uses them by default, shared with L&F and the `orca` teacher
+ORCA_HORIZON = 1.0  # s: velocities keep every neighbour clear for this long
+ORCA_MARGIN = 0.1  # m, added to the robots' and obstacles' radii
+ORCA_RECOVERY = 0.1  # s in which two robots that touch are separated (the world's control period)
+
 
 @dataclass
 class ZhuConfig:
@@ -61,9 +66,9 @@ class ZhuConfig:
     with the classical approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28 (docs/zhu.md)."""
     target_gap: float = 0.1
     """Ours: targets of two robots closer than 2 r + target_gap are pushed apart (as STAF's plan does); 0: off."""
-    orca_horizon: float = 1.0  # s: velocities keep every neighbour clear for this long
-    orca_margin: float = 0.1  # m, added to the robots' and obstacles' radii
-    orca_recovery: float = 0.1  # s in which two robots that touch are separated (the world's control period)
+    orca_horizon: float = ORCA_HORIZON
+    orca_margin: float = ORCA_MARGIN
+    orca_recovery: float = ORCA_RECOVERY
     n_dead: int = 30
     """n_dead, consecutive control steps of too little progress that flag a stuck robot (Section IV-D)."""
     dp_min: float = 0.15

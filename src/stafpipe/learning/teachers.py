@@ -28,7 +28,7 @@ from stafpipe.controllers.base import STOP_GAP, limit_approach
 from stafpipe.controllers.lf import LFConfig
 from stafpipe.controllers.orca import orca_velocities
 from stafpipe.controllers.plan_config import PlanConfig
-from stafpipe.controllers.zhu_config import ZhuConfig
+from stafpipe.controllers.zhu_config import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
@@ -36,9 +36,8 @@ TEACHERS = ("proportional", "avoiding", "sliding", "capped", "orca")
 SLIDE_MARGIN = PlanConfig().margin
 """m between a robot's surface and the closest obstacle that the `sliding` teacher's aim keeps: the plan's default
 `margin` between a formation's outer robots and the walls (0.15 m)."""
-_LF, _ZHU = LFConfig(), ZhuConfig()  # the teachers avoid as method=lf and method=zhu do by default
+_LF = LFConfig()  # the teachers avoid as method=lf's cap and method=zhu's ORCA do by default
 AVOID_DISTANCE, AVOID_GAIN = _LF.avoid_distance, _LF.avoid_gain
-ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY = _ZHU.orca_horizon, _ZHU.orca_margin, _ZHU.orca_recovery
 
 
 def check_low_level(low_level: str, gain: float, key: str, stop_gap: float = STOP_GAP) -> None:
