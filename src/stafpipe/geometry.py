@@ -341,12 +341,21 @@ def path_length(path: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
 
 
-def point_ahead(path: np.ndarray, points: np.ndarray, ahead: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For each point (P, 2): the point `ahead` metres beyond its projection on the polyline `path` (K, 2) (capped at
-    the end), the path's unit direction there, and the arc length still left after the projection."""
+def path_parts(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A polyline's (K, 2) segments (K-1, 2), their lengths (K-1,) and the arc length at each vertex (K,), as
+    `point_ahead` uses them (a caller that asks every step of the same path computes them once)."""
     seg = np.diff(path, axis=0)
     length = np.maximum(np.linalg.norm(seg, axis=1), 1e-9)
-    cum = np.concatenate([[0.0], np.cumsum(length)])
+    return seg, length, np.concatenate([[0.0], np.cumsum(length)])
+
+
+def point_ahead(
+    path: np.ndarray, points: np.ndarray, ahead: float, parts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For each point (P, 2): the point `ahead` metres beyond its projection on the polyline `path` (K, 2) (capped at
+    the end), the path's unit direction there, and the arc length still left after the projection; `parts`:
+    `path_parts(path)` where the caller has them."""
+    seg, length, cum = path_parts(path) if parts is None else parts
     t = np.clip(np.einsum("pkd,kd->pk", points[:, None] - path[None, :-1], seg) / length**2, 0.0, 1.0)
     proj = path[None, :-1] + t[..., None] * seg[None]
     k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)

@@ -24,7 +24,7 @@ from stafpipe.controllers.orca import orca_velocities
 from stafpipe.controllers.zhu_config import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY
 from stafpipe.errors import require
 from stafpipe.formations import rotation
-from stafpipe.geometry import Geometry, point_ahead
+from stafpipe.geometry import Geometry, path_parts, point_ahead
 from stafpipe.sensing import Observation
 
 
@@ -80,6 +80,7 @@ class LFController(Controller):
             self.path = Geometry.of(team.scenario).path_to(start, goal, self.radius + self.cfg.clearance_margin)
         except ValueError:  # no path with the margin: fall back to the straight line (it will get stuck, honestly)
             self.path = np.array([start, goal])
+        self.path_parts = path_parts(self.path)
         self.goal = team.goal
         self.lead_heard = np.array(team.start[self.leader], dtype=float)
 
@@ -124,7 +125,7 @@ class LFController(Controller):
         if obs.heard[others, self.leader].any() or not obs.neighbours[others, self.leader].any():
             self.lead_heard = p[self.leader].copy()
         lead = p[self.leader]  # the leader knows where it is
-        points, directions, _ = point_ahead(self.path, lead[None], cfg.lookahead)
+        points, directions, _ = point_ahead(self.path, lead[None], cfg.lookahead, self.path_parts)
         point, direction = points[0], directions[0]
         if np.linalg.norm(self.goal[self.leader] - lead) > cfg.lookahead:
             self.heading = math.atan2(direction[1], direction[0])  # the formation turns with the leader's path

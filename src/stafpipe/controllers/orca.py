@@ -18,59 +18,63 @@ import numpy as np
 from stafpipe.sensing import Observation
 
 _EPS = 1e-9
-Line = tuple[np.ndarray, np.ndarray]
-"""A half-plane of velocities: (a point on its boundary, the boundary's direction); the left side is allowed."""
+Vec = tuple[float, float]
+Line = tuple[float, float, float, float]
+"""A half-plane of velocities: a point on its boundary (px, py) and the boundary's direction (dx, dy); the left side
+is allowed. Plain floats: a robot's program has a few dozen lines of two numbers each, where numpy's per-call cost
+would be most of the work (the same operations in the same order, so the same bits)."""
 
 
-def _det(a: np.ndarray, b: np.ndarray) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
-
-
-def _line(
-    rel_p: np.ndarray, rel_v: np.ndarray, radius: float, horizon: float, dt: float, share: float, v_own: np.ndarray
-):
+def _line(rel_p: Vec, rel_v: Vec, radius: float, horizon: float, dt: float, share: float, v_own: Vec) -> Line:
     """The half-plane for one other body: rel_p its position relative to the robot, rel_v the robot's velocity relative
     to it, radius the sum of both radii (and a margin); `share` of the avoidance is the robot's (1/2: reciprocal)."""
-    dist2 = float(rel_p @ rel_p)
+    px, py = rel_p
+    rvx, rvy = rel_v
+    dist2 = px * px + py * py
     r2 = radius * radius
     if dist2 > r2:  # not touching: the velocity obstacle truncated at `horizon`
-        w = rel_v - rel_p / horizon
-        w2 = float(w @ w)
-        dot = float(w @ rel_p)
+        wx, wy = rvx - px / horizon, rvy - py / horizon
+        w2 = wx * wx + wy * wy
+        dot = wx * px + wy * py
         if dot < 0 and dot * dot > r2 * w2:  # nearest point on the truncation circle
             w_len = math.sqrt(w2)
-            unit = w / max(w_len, _EPS)
-            direction = np.array([unit[1], -unit[0]])
-            u = (radius / horizon - w_len) * unit
+            scale = max(w_len, _EPS)
+            ux, uy = wx / scale, wy / scale
+            dx, dy = uy, -ux
+            c = radius / horizon - w_len
+            ox, oy = c * ux, c * uy
         else:  # nearest point on a leg of the cone
             leg = math.sqrt(dist2 - r2)
-            if _det(rel_p, w) > 0:
-                direction = np.array([rel_p[0] * leg - rel_p[1] * radius, rel_p[0] * radius + rel_p[1] * leg]) / dist2
+            if px * wy - py * wx > 0:
+                dx, dy = (px * leg - py * radius) / dist2, (px * radius + py * leg) / dist2
             else:
-                direction = -np.array([rel_p[0] * leg + rel_p[1] * radius, -rel_p[0] * radius + rel_p[1] * leg]) / dist2
-            u = float(rel_v @ direction) * direction - rel_v
+                dx, dy = -((px * leg + py * radius) / dist2), -((-px * radius + py * leg) / dist2)
+            c = rvx * dx + rvy * dy
+            ox, oy = c * dx - rvx, c * dy - rvy
     else:  # already touching: get apart within one control step
-        w = rel_v - rel_p / dt
-        w_len = math.sqrt(float(w @ w))
-        unit = w / max(w_len, _EPS)
-        direction = np.array([unit[1], -unit[0]])
-        u = (radius / dt - w_len) * unit
-    return v_own + share * u, direction
+        wx, wy = rvx - px / dt, rvy - py / dt
+        w_len = math.sqrt(wx * wx + wy * wy)
+        scale = max(w_len, _EPS)
+        ux, uy = wx / scale, wy / scale
+        dx, dy = uy, -ux
+        c = radius / dt - w_len
+        ox, oy = c * ux, c * uy
+    return v_own[0] + share * ox, v_own[1] + share * oy, dx, dy
 
 
-def _lp1(lines: list[Line], k: int, max_speed: float, pref: np.ndarray, direction_opt: bool) -> np.ndarray | None:
+def _lp1(lines: list[Line], k: int, max_speed: float, pref: Vec, direction_opt: bool) -> Vec | None:
     """The best velocity on line k within the speed disc and the lines before k (None: there is none)."""
-    point, direction = lines[k]
-    dot = float(point @ direction)
-    disc = dot * dot + max_speed * max_speed - float(point @ point)
+    px, py, dx, dy = lines[k]
+    dot = px * dx + py * dy
+    disc = dot * dot + max_speed * max_speed - (px * px + py * py)
     if disc < 0:
         return None
     sq = math.sqrt(disc)
     t_left, t_right = -dot - sq, -dot + sq
     for i in range(k):
-        p_i, d_i = lines[i]
-        denom = _det(direction, d_i)
-        numer = _det(d_i, point - p_i)
+        qx, qy, ex, ey = lines[i]
+        denom = dx * ey - dy * ex
+        numer = ex * (py - qy) - ey * (px - qx)
         if abs(denom) <= _EPS:  # parallel
             if numer < 0:
                 return None
@@ -83,23 +87,25 @@ def _lp1(lines: list[Line], k: int, max_speed: float, pref: np.ndarray, directio
         if t_left > t_right:
             return None
     if direction_opt:
-        t = t_right if float(pref @ direction) > 0 else t_left
+        t = t_right if pref[0] * dx + pref[1] * dy > 0 else t_left
     else:
-        t = min(max(float(direction @ (pref - point)), t_left), t_right)
-    return point + t * direction
+        t = min(max(dx * (pref[0] - px) + dy * (pref[1] - py), t_left), t_right)
+    return px + t * dx, py + t * dy
 
 
-def _lp2(lines: list[Line], max_speed: float, pref: np.ndarray, direction_opt: bool) -> tuple[int, np.ndarray]:
+def _lp2(lines: list[Line], max_speed: float, pref: Vec, direction_opt: bool) -> tuple[int, Vec]:
     """The velocity nearest `pref` (or furthest along it, `direction_opt`) in the speed disc and every half-plane;
     returns (number of lines satisfied, velocity): a count short of len(lines) means infeasible from that line on."""
+    pref2 = pref[0] * pref[0] + pref[1] * pref[1]
     if direction_opt:
-        result = pref * max_speed
-    elif float(pref @ pref) > max_speed * max_speed:
-        result = pref / math.sqrt(float(pref @ pref)) * max_speed
+        result = pref[0] * max_speed, pref[1] * max_speed
+    elif pref2 > max_speed * max_speed:
+        norm = math.sqrt(pref2)
+        result = pref[0] / norm * max_speed, pref[1] / norm * max_speed
     else:
-        result = pref.copy()
-    for k, (point, direction) in enumerate(lines):
-        if _det(direction, point - result) > 0:  # on the wrong side of line k
+        result = pref
+    for k, (px, py, dx, dy) in enumerate(lines):
+        if dx * (py - result[1]) - dy * (px - result[0]) > 0:  # on the wrong side of line k
             found = _lp1(lines, k, max_speed, pref, direction_opt)
             if found is None:
                 return k, result
@@ -107,31 +113,32 @@ def _lp2(lines: list[Line], max_speed: float, pref: np.ndarray, direction_opt: b
     return len(lines), result
 
 
-def _lp3(lines: list[Line], n_fixed: int, start: int, max_speed: float, result: np.ndarray) -> np.ndarray:
+def _lp3(lines: list[Line], n_fixed: int, start: int, max_speed: float, result: Vec) -> Vec:
     """When the half-planes from `start` on leave no velocity: the one that violates them least (the first `n_fixed`,
     static obstacles, stay hard)."""
     distance = 0.0
     for k in range(start, len(lines)):
-        point, direction = lines[k]
-        if _det(direction, point - result) <= distance:
+        px, py, dx, dy = lines[k]
+        if dx * (py - result[1]) - dy * (px - result[0]) <= distance:
             continue
         projected = list(lines[:n_fixed])
         for i in range(n_fixed, k):
-            p_i, d_i = lines[i]
-            det = _det(direction, d_i)
+            qx, qy, ex, ey = lines[i]
+            det = dx * ey - dy * ex
             if abs(det) <= _EPS:
-                if float(direction @ d_i) > 0:  # same direction: no constraint between them
+                if dx * ex + dy * ey > 0:  # same direction: no constraint between them
                     continue
-                p = 0.5 * (point + p_i)
+                cx, cy = 0.5 * (px + qx), 0.5 * (py + qy)
             else:
-                p = point + (_det(d_i, point - p_i) / det) * direction
-            d = d_i - direction
-            projected.append((p, d / max(math.hypot(d[0], d[1]), _EPS)))
-        pref = np.array([-direction[1], direction[0]])
-        count, candidate = _lp2(projected, max_speed, pref, True)
+                t = (ex * (py - qy) - ey * (px - qx)) / det
+                cx, cy = px + t * dx, py + t * dy
+            fx, fy = ex - dx, ey - dy
+            scale = max(math.hypot(fx, fy), _EPS)
+            projected.append((cx, cy, fx / scale, fy / scale))
+        count, candidate = _lp2(projected, max_speed, (-dy, dx), True)
         if count == len(projected):
             result = candidate
-        distance = _det(direction, point - result)
+        distance = dx * (py - result[1]) - dy * (px - result[0])
     return result
 
 
@@ -148,26 +155,40 @@ def orca_velocities(
     """Collision-free velocities (n, 2) nearest the preferred ones `pref` (n, 2) for one world's observation: every
     sensed robot (reciprocal), every moving obstacle (the robot avoids alone) and the nearest static obstacle point
     (hard), with `margin` (m) added to every clearance."""
+    n = len(pref)
     out = np.empty_like(pref)
-    v = obs.velocity
-    mover_r = np.zeros(0) if mover_radius is None else np.asarray(mover_radius, dtype=float)
-    movers = obs.movers[: len(mover_r)]
-    for i in range(len(pref)):
+    velocity = obs.velocity.tolist()
+    obstacle = obs.obstacle.tolist()
+    obstacle_distance = obs.obstacle_distance.tolist()
+    prefs = pref.tolist()
+    mover_r = [] if mover_radius is None else np.asarray(mover_radius, dtype=float).tolist()
+    movers = obs.movers[: len(mover_r)].tolist()
+    position = obs.position.tolist() if movers else []
+    pair_radius = 2 * radius + margin
+    rows, cols = np.nonzero(obs.neighbours)  # row by row, each row's neighbours in ascending order
+    pair_p = obs.rel_position[rows, cols].tolist()
+    pair_v = obs.rel_velocity[rows, cols].tolist()
+    bounds = np.searchsorted(rows, np.arange(n + 1)).tolist()
+    for i in range(n):
         lines: list[Line] = []
-        gap = float(obs.obstacle_distance[i]) - margin
+        v_own = velocity[i][0], velocity[i][1]
+        gap = obstacle_distance[i] - margin
         if gap < max_speed * horizon:  # the nearest obstacle point: approach it no faster than closes the gap in time
-            normal = obs.obstacle[i] / max(float(np.linalg.norm(obs.obstacle[i])), _EPS)
-            lines.append((normal * max(gap, 0.0) / horizon, np.array([-normal[1], normal[0]])))
+            ax, ay = obstacle[i]
+            scale = max(math.sqrt(ax * ax + ay * ay), _EPS)
+            nx, ny = ax / scale, ay / scale
+            g = max(gap, 0.0)
+            lines.append((nx * g / horizon, ny * g / horizon, -ny, nx))
         n_fixed = len(lines)
-        for j in np.flatnonzero(obs.neighbours[i]):
-            lines.append(
-                _line(obs.rel_position[i, j], -obs.rel_velocity[i, j], 2 * radius + margin, horizon, dt, 0.5, v[i])
-            )
-        for k in range(len(movers)):
-            rel_p = movers[k, :2] - obs.position[i]
-            if float(np.linalg.norm(rel_p)) < max_speed * horizon * 2 + mover_r[k]:  # it can be reached in time
-                lines.append(_line(rel_p, v[i] - movers[k, 2:], radius + mover_r[k] + margin, horizon, dt, 1.0, v[i]))
-        count, result = _lp2(lines, max_speed, pref[i], False)
+        for k in range(bounds[i], bounds[i + 1]):
+            (qx, qy), (ux, uy) = pair_p[k], pair_v[k]
+            lines.append(_line((qx, qy), (-ux, -uy), pair_radius, horizon, dt, 0.5, v_own))
+        for (mx, my, mvx, mvy), mr in zip(movers, mover_r, strict=False):  # movers sensed: at most len(mover_r)
+            qx, qy = mx - position[i][0], my - position[i][1]
+            if math.sqrt(qx * qx + qy * qy) < max_speed * horizon * 2 + mr:  # it can be reached in time
+                away = v_own[0] - mvx, v_own[1] - mvy
+                lines.append(_line((qx, qy), away, radius + mr + margin, horizon, dt, 1.0, v_own))
+        count, result = _lp2(lines, max_speed, (prefs[i][0], prefs[i][1]), False)
         if count < len(lines):
             result = _lp3(lines, n_fixed, count, max_speed, result)
         out[i] = result
