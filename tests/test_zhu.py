@@ -239,6 +239,32 @@ def test_a_line_stalled_at_a_door_its_regions_do_not_reach_splits_and_passes() -
     assert sr == {0.0: 0.0, 3.0: 1.0}
 
 
+def test_a_robot_left_behind_a_narrow_door_follows_the_path_to_it() -> None:
+    # four robots in a line before a 0.66 m door (a generated map no study had seen): one slips through and p_r goes
+    # on with it; the others, aiming at p_r beyond the wall, stood at the wall's face nearest it for the rest of the
+    # episode (SR 0). Aiming 1 m ahead of their own place on the path (`team_reference`) brings them to the door.
+    spec = dataclasses.replace(
+        _open_lane(4),
+        team=TeamSpec(n=4, formation="line", spacing=1.0, start=(1.5, 5.565), goal=(16.41, 6.389), heading_deg=0.0),
+        obstacles=[
+            {"box": {"center": [9.264, 1.418], "size": [0.394, 2.835]}},
+            {"box": {"center": [9.264, 7.314], "size": [0.394, 7.633]}},
+        ],
+        world=WorldBounds(0, 0, 17.91, 11.13),
+        time_limit=60.0,
+    )
+    scenario = build_scenario(spec)
+    sr = {}
+    for team_reference in (False, True):
+        controller = ZhuController(dataclasses.replace(ZhuConfig(), team_reference=team_reference))
+        values = run_episode(
+            scenario, Geometry(scenario, resolution=0.1), controller, "zhu", 0, WorldConfig(), SensingConfig()
+        )
+        sr[team_reference] = values["sr"]
+        assert values["collisions"] == 0
+    assert sr == {False: 0.0, True: 1.0}
+
+
 def test_a_team_spaced_tighter_than_the_shrink_floor_keeps_its_spacing() -> None:
     # spacing 0.4 m = the robots' diameter: below 2 r + 0.1 m no scale of the template is allowed, and the fit had
     # no candidate at all (a crash); now the template keeps its own spacing

@@ -259,7 +259,8 @@ class Geometry:
         cell = np.minimum(np.maximum(cell, 0), (len(xs) - 1, len(ys) - 1))
         return clear[cell[..., 1], cell[..., 0]]
 
-    def _visible(self, p: np.ndarray, q: np.ndarray, clearance: float) -> bool:
+    def visible(self, p: np.ndarray, q: np.ndarray, clearance: float) -> bool:
+        """Whether the straight way from p to q keeps `clearance` (m) from every obstacle (sampled every half cell)."""
         k = max(2, int(np.linalg.norm(q - p) / (self.resolution / 2)) + 1)
         samples = p + np.linspace(0.0, 1.0, k)[:, None] * (q - p)
         return bool((self.clearance(samples) >= clearance).all())
@@ -267,7 +268,7 @@ class Geometry:
     def _pull_string(self, pts: np.ndarray, clearance: float) -> np.ndarray:
         out, anchor, j = [pts[0]], 0, 1
         while j < len(pts):
-            if not self._visible(pts[anchor], pts[j], clearance):
+            if not self.visible(pts[anchor], pts[j], clearance):
                 anchor = j - 1
                 out.append(pts[anchor])
             j += 1

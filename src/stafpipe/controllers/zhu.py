@@ -51,9 +51,11 @@ from stafpipe.convex_region import (
     regions_from_halfplanes,
 )
 from stafpipe.formations import assign_slots, formation_slots, rotation
-from stafpipe.geometry import capsule_arrays
+from stafpipe.geometry import Geometry, capsule_arrays, path_parts, point_ahead
 from stafpipe.sensing import Observation
 
+SIGHT_GAP = 0.05
+"""A team sees p_r when the straight way from its centre keeps this far (m) from every obstacle (`team_reference`)."""
 TIMED_PARTS = ("convex_regions", "split_check", "graph_partition", "merge_decision", "formation_control")
 """Table I's rows."""
 
@@ -83,6 +85,8 @@ class ZhuController(Controller):
         self.path, self.goal = team.path, team.goal
         seg = np.linalg.norm(np.diff(self.path, axis=0), axis=1)
         self.cum = np.concatenate([[0.0], np.cumsum(seg)])
+        self.path_parts = path_parts(self.path)  # for the teams' own references (`team_reference`)
+        self.geometry = Geometry.of(team.scenario)
         self.s_ref = 0.0
         self._ref: tuple[float, np.ndarray, float] | None = None
         self.teams: dict[int, list[int]] = {1: list(range(self.n))}
@@ -126,6 +130,22 @@ class ZhuController(Controller):
         length = max(float(np.linalg.norm(d)), 1e-9)
         self._ref = (self.s_ref, self.path[j] + (s - self.cum[j]) / length * d, math.atan2(d[1], d[0]))
         return self._ref[1], self._ref[2]
+
+    def team_reference(self, members: list[int], p: np.ndarray) -> tuple[np.ndarray, float]:
+        """Where team `members` aims: p_r and the path's heading there, or for a team more than max_lag from p_r whose
+        straight way to it crosses an obstacle (`team_reference`), the path's point `team_lookahead` ahead of the team
+        centre's projection on it, if that is short of p_r, and the heading there."""
+        ref, heading = self.reference()
+        if not self.cfg.team_reference or len(members) == self.n:
+            return ref, heading
+        centre = p[members].mean(axis=0)
+        if float(np.linalg.norm(centre - ref)) <= self.cfg.max_lag or self.geometry.visible(centre, ref, SIGHT_GAP):
+            return ref, heading
+        ahead = self.cfg.team_lookahead
+        point, direction, left = point_ahead(self.path, centre[None], ahead, self.path_parts)
+        if self.cum[-1] - float(left[0]) + ahead >= min(self.s_ref, self.cum[-1]):
+            return ref, heading
+        return point[0], math.atan2(direction[0, 1], direction[0, 0])
 
     def _at_goal(self) -> bool:
         """p_r has reached the end of the team's path."""
@@ -172,8 +192,9 @@ class ZhuController(Controller):
     def grow_regions(self, obs: Observation) -> list[Region]:
         """Every robot's P_i (Algorithm 1, step 2)."""
         a, b, r = self._obstacles(obs)
-        ref, _ = self.reference()
-        ahead = ref - obs.position
+        ahead = np.empty_like(obs.position)
+        for members in self.teams.values():
+            ahead[members] = self.team_reference(members, obs.position)[0] - obs.position[members]
         ahead /= np.maximum(np.linalg.norm(ahead, axis=1, keepdims=True), 1e-9)
         # once p_r has reached the goal there is no "ahead" left: the teams regroup round it in whole discs
         behind = math.inf if self._at_goal() else self.cfg.behind
@@ -326,7 +347,6 @@ class ZhuController(Controller):
 
     # ---- local formation control (Section III) ---------------------------------------------------------------------
     def _formation_control(self, p: np.ndarray) -> None:
-        ref, heading = self.reference()
         at_end = self._at_goal()
         ids = list(self.teams)
         self.common = dict(
@@ -334,6 +354,7 @@ class ZhuController(Controller):
         )
         room = self._clear_of_other_teams(p) if len(ids) > 1 else {}
         for k, members in self.teams.items():
+            ref, heading = self.team_reference(members, p)
             region = intersect_all([[self.common[k], room[k]]])[0] if k in room else self.common[k]
             slots: np.ndarray | None
             if at_end and len(members) == self.n:  # the whole team is back: take the goal formation (its own slots)
