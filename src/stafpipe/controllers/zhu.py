@@ -87,6 +87,8 @@ class ZhuController(Controller):
         self.cum = np.concatenate([[0.0], np.cumsum(seg)])
         self.path_parts = path_parts(self.path)  # for the teams' own references (`team_reference`)
         self.geometry = Geometry.of(team.scenario)
+        self._blind_since: dict[tuple[int, ...], float] = {}
+        self._now = 0.0
         self.s_ref = 0.0
         self._ref: tuple[float, np.ndarray, float] | None = None
         self.teams: dict[int, list[int]] = {1: list(range(self.n))}
@@ -133,19 +135,37 @@ class ZhuController(Controller):
 
     def team_reference(self, members: list[int], p: np.ndarray) -> tuple[np.ndarray, float]:
         """Where team `members` aims: p_r and the path's heading there, or for a team more than max_lag from p_r whose
-        straight way to it crosses an obstacle (`team_reference`), the path's point `team_lookahead` ahead of the team
-        centre's projection on it, if that is short of p_r, and the heading there."""
+        straight way to it crosses an obstacle, and has for `team_wait` seconds (`team_reference`, `_watch_sight`),
+        the path's point `team_lookahead` ahead of the team centre's projection on it, if that is short of p_r, and
+        the heading there."""
         ref, heading = self.reference()
         if not self.cfg.team_reference or len(members) == self.n:
             return ref, heading
         centre = p[members].mean(axis=0)
         if float(np.linalg.norm(centre - ref)) <= self.cfg.max_lag or self.geometry.visible(centre, ref, SIGHT_GAP):
             return ref, heading
+        if self.cfg.team_wait > 0 and self._now - self._blind_since.get(tuple(members), self._now) < self.cfg.team_wait:
+            return ref, heading
         ahead = self.cfg.team_lookahead
         point, direction, left = point_ahead(self.path, centre[None], ahead, self.path_parts)
         if self.cum[-1] - float(left[0]) + ahead >= min(self.s_ref, self.cum[-1]):
             return ref, heading
         return point[0], math.atan2(direction[0, 1], direction[0, 0])
+
+    def _watch_sight(self, p: np.ndarray, t: float) -> None:
+        """With `team_wait`: since when each team (but the whole team) has stood more than max_lag from p_r with its
+        straight way to p_r crossing an obstacle; a team that sees p_r, or is near it, starts afresh."""
+        self._now = t
+        if not self.cfg.team_reference or self.cfg.team_wait <= 0:
+            return
+        ref, _ = self.reference()
+        blind = {}
+        for members in self.teams.values():
+            key, centre = tuple(members), p[members].mean(axis=0)
+            far = len(members) < self.n and float(np.linalg.norm(centre - ref)) > self.cfg.max_lag
+            if far and not self.geometry.visible(centre, ref, SIGHT_GAP):
+                blind[key] = self._blind_since.get(key, t)
+        self._blind_since = blind
 
     def _at_goal(self) -> bool:
         """p_r has reached the end of the team's path."""
@@ -213,6 +233,7 @@ class ZhuController(Controller):
         if t + 1e-9 >= self.next_control:
             self.next_control += cfg.control_period
             self._advance_reference(p)
+            self._watch_sight(p, t)
             with self._timed("convex_regions"):
                 self.regions = self.grow_regions(obs)
             decided = t + 1e-9 >= self.next_decision

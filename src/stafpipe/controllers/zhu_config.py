@@ -46,13 +46,17 @@ class ZhuConfig:
     """Distance (m) between p_r and the nearest team centre beyond which p_r waits (waiting for the farthest team
     deadlocks when a subteam ahead blocks the one behind)."""
     team_reference: bool = True
-    """Ours: a team more than max_lag from p_r whose straight way to p_r crosses an obstacle aims at the path's point
-    `team_lookahead` ahead of its own place on the path (never beyond p_r), for its region's "ahead" and its
-    formation's fit; false: every team aims at p_r, as until 2026-12-06. With one p_r, a team left behind a wall while
-    another went on through the door aimed at the wall's face nearest p_r for ever (docs/zhu.md, "Teams left
-    behind")."""
+    """Ours: a team more than max_lag from p_r whose straight way to p_r crosses an obstacle (for `team_wait`) aims
+    at the path's point `team_lookahead` ahead of its own place on the path (never beyond p_r), for its region's
+    "ahead" and its formation's fit; false: every team aims at p_r, as until 2026-12-06. With one p_r, a team left
+    behind a wall while another went on through the door aimed at the wall's face nearest p_r for ever (docs/zhu.md,
+    "Teams left behind")."""
     team_lookahead: float = 1.0
     """With team_reference: how far ahead (m) of a lagging team's place on the path it aims."""
+    team_wait: float = 0.0
+    """With team_reference: how long (s) a team stays over max_lag from p_r and out of its sight before it aims along
+    the path; 0: at once. 3 s (as stall_time) was tried: better on an obstacle field where passing an obstacle hides p_r
+    for a moment, worse on 41 generated maps (docs/zhu.md, "Teams left behind")."""
     scales: list[float] = field(default_factory=lambda: [1.0, 0.8])
     """Formation scales tried when fitting ([20] optimises the scale); a scale never takes the spacing below 2 r +
     0.1 m, and a team spaced tighter than that keeps its own spacing."""
@@ -91,6 +95,7 @@ class ZhuConfig:
         require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)
         require(self.behind > 0, f"{key}.behind", "must be > 0", self.behind)
         require(self.team_lookahead > 0, f"{key}.team_lookahead", "must be > 0", self.team_lookahead)
+        require(self.team_wait >= 0, f"{key}.team_wait", "must be >= 0", self.team_wait)
         require(self.horizon >= 0, f"{key}.horizon", "must be >= 0", self.horizon)
         require(
             self.decision_period > 0 and self.control_period > 0,
