@@ -98,12 +98,13 @@ class CezayirliConfig:
     def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
         """The robots' sensor is the run's (Section II): d_max = sensing.radius, Delta r = sensing.range_error, and one
         steering step per control period."""
-        for mine, theirs, name in (
-            (self.d_max, sensing.radius, "d_max/sensing.radius"),
-            (self.range_error, sensing.range_error, "range_error/sensing.range_error"),
-            (self.period, world.control_dt, "period/world.control_dt"),
+        for mine, theirs, name, other in (
+            (self.d_max, sensing.radius, "d_max", "sensing.radius"),
+            (self.range_error, sensing.range_error, "range_error", "sensing.range_error"),
+            (self.period, world.control_dt, "period", "world.control_dt"),
         ):
-            require(math.isclose(mine, theirs), f"{key}.{name}", "must be equal (e.g. experiment=cezayirli_sim1)",
+            hint = f"must be equal (the robots' sensor is the run's): set {key}.{name}={theirs:g} or {other}={mine:g}"
+            require(math.isclose(mine, theirs), f"{key}.{name}/{other}", f"{hint}, or use experiment=cezayirli_sim1",
                     (mine, theirs))  # fmt: skip
 
 
