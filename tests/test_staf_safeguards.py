@@ -61,6 +61,23 @@ def test_robots_held_at_the_path_end_start_home(tmp_path, end_home) -> None:
     assert math.isfinite(tt) == end_home
 
 
+@pytest.mark.parametrize("end_wait", [2.0, 0.0])
+def test_a_robot_held_at_the_path_end_short_of_its_target_starts_home_after_standing_still(tmp_path, end_wait) -> None:
+    """`plan.end_wait`: a robot of a subteam at the path's end that cannot reach its target (0.4 m off it, where robots
+    already home stand) starts for home once it has stood still for `end_wait` seconds, not before; the robots on
+    their targets start at once (`end_home`). With 0 it waits for ever (a generated bridge ending 2 m from the
+    world's edge: 3 of 11 robots stood there for the rest of the episode)."""
+    sc = _map(tmp_path, _EXIT_TURN)
+    _, plan = start_and_plan(sc, _no_split, PlanConfig(end_wait=end_wait))
+    plan.anchor[:] = plan.frame.length
+    pos = plan.targets.copy()
+    pos[0] += (0.4, 0.0)
+    started = [plan._held_at_end(pos, 0.1) for _ in range(25)]
+    assert all(s[1:].all() for s in started)
+    first = next((k for k, s in enumerate(started) if s[0]), None)
+    assert first == (20 if end_wait else None)  # 2 s of 0.1 s steps after the first, which sets where it stands
+
+
 @pytest.mark.parametrize("wait", [2.0, 0.5])
 def test_a_target_behind_a_wall_moves_onto_the_path_ahead_of_the_robot(wait) -> None:
     """`plan.in_sight`: a robot beside the corridor's mouth whose target lies inside the corridor (the wall between

@@ -31,6 +31,7 @@ PLAN_SAFEGUARDS = (
     "unblock",
     "extend_path",
     "end_home",
+    "end_wait",
     "in_sight",
     "sight_wait",
     "reorder",

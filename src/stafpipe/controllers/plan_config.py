@@ -79,6 +79,10 @@ class PlanConfig:
     """After the regroup, a robot of a subteam whose anchor has reached the path's end starts for home once it is
     within a radius of its target (it can come no further); false: it waits until it has passed the last narrow
     stretch, as trained, and where that stretch reaches to the path's end it waits for ever. docs/staf.md."""
+    end_wait: float = 2.0
+    """With `end_home`: such a robot also starts for home once it has moved less than 5 cm in this many seconds (its
+    target, among robots already home, cannot be reached); 0: only within a radius of its target, as until
+    2026-12-06. docs/staf.md."""
     in_sight: bool = True
     """A robot whose straight way to its target has crossed an obstacle for 2 s (a wall between them) aims instead at
     the path, up to 1 m from its own place on it, until its target is in sight again; false: it heads for its target
@@ -149,3 +153,4 @@ class PlanConfig:
         require(self.target_gap >= 0, f"{key}.target_gap", "must be >= 0", self.target_gap)
         require(self.short_of_ahead >= 0, f"{key}.short_of_ahead", "must be >= 0", self.short_of_ahead)
         require(self.home_approach >= 0, f"{key}.home_approach", "must be >= 0", self.home_approach)
+        require(self.end_wait >= 0, f"{key}.end_wait", "must be >= 0", self.end_wait)

@@ -231,3 +231,12 @@ def short_of_ahead(
     length = lengths(back, keepdims=True)
     out[hit] = np.where(length > 1e-9, pos[near[hit]] + distance * back / np.maximum(length, 1e-9), targets[hit])
     return out
+
+
+def stood_still(still: np.ndarray, still_at: np.ndarray, pos: np.ndarray, dt: float, move: float = 0.05) -> np.ndarray:
+    """Seconds (n,) each robot has stayed within `move` (m) of where it last moved, updated in place for one step of
+    `dt`: a robot further than `move` from `still_at` starts again from where it is now."""
+    moved = lengths(pos - still_at) > move
+    still[:] = np.where(moved, 0.0, still + dt)
+    still_at[moved] = pos[moved]
+    return still

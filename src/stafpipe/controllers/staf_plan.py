@@ -2,15 +2,11 @@
 
 The team travels as one formation along its planned path (TeamInfo.path). When a passage ahead is too narrow for the
 whole team, the high level (deep graph cut, `highlevel/`) divides it into m subteams (m=auto: the smallest m whose
-subteams fit, STAF Sec. 7). Each subteam takes the team's formation type with its own robots, its spacing shrunk where
-the path is narrow (the "adaptation within the same type", Sec. 3), and the subteams pass the narrow part one after
-another in the order of their progress. Once every robot has passed into space large enough for the full team, every
-robot's target becomes its own goal slot (Sec. 3, low level: "the goal position of each individual robot is updated to
-align with the full team's goal"): the regroup.
-
-The plan gives targets (slots), subteam labels and the expected pair distances d_ij of R^adp; the learned low level
-(`learning/staf_net.py`) drives the robots. The plan is plain numpy and cheap; the same code runs in PPO training and
-in `method=staf`, so the policy is trained on exactly the targets it is executed with. Decisions: docs/staf.md.
+subteams fit, STAF Sec. 7). Each subteam takes the team's formation type with its own robots (Sec. 3's "adaptation
+within the same type"), and the subteams pass the narrow part one after another. Once every robot has passed into
+space large enough for the full team, every robot's target becomes its own goal slot (Sec. 3, low level): the regroup.
+The plan gives targets, subteam labels and the pair distances d_ij of R^adp; the learned low level drives the robots.
+The same numpy code runs in PPO training and in `method=staf`. Decisions: docs/staf.md.
 """
 
 from __future__ import annotations
@@ -120,6 +116,8 @@ class StafPlan:
         self.split_from: np.ndarray | None = None
         self.split_frac, self.split_rate = 1.0, 0.0
         self.unseen = np.zeros(self.n)  # seconds each robot's target has been out of its sight (`in_sight`)
+        self.still = np.zeros(self.n)  # seconds each robot has stayed within 5 cm of `still_at` (`end_wait`)
+        self.still_at = np.full((self.n, 2), np.inf)
 
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
@@ -195,7 +193,7 @@ class StafPlan:
         self._place()
         self._slide_into_subteams(dt)
         if self.merging:  # robots that are through head for their goal slots; the others still follow their subteam
-            passed = passed | self._stopped_short() | self._held_at_end(pos)
+            passed = passed | self._stopped_short() | self._held_at_end(pos, dt)
             self._start_home(passed, pos)
             self.labels[passed] = 0
             return self._home(dt)
@@ -422,15 +420,16 @@ class StafPlan:
                 out[self.order[j]] = True
         return out
 
-    def _held_at_end(self, pos: np.ndarray) -> np.ndarray:
-        """(n,) robots on their targets in subteams whose anchor is at the path's end (`end_home`): nothing moves
-        them on, so they start for home from there."""
+    def _held_at_end(self, pos: np.ndarray, dt: float) -> np.ndarray:
+        """(n,) robots on their targets, or standing still for `end_wait` (`end_home`), in subteams whose anchor is at
+        the path's end: nothing moves them on, so they start for home from there."""
         out = np.zeros(self.n, dtype=bool)
         if not self.cfg.end_home:
             return out
+        stalled = geo.stood_still(self.still, self.still_at, pos, dt) >= self.cfg.end_wait if self.cfg.end_wait else out
         for j, idx in enumerate(self.order):
             if self.hold[j] is None and self.anchor[j] >= self.frame.length - 1e-6:
-                out[idx] = np.linalg.norm(pos[idx] - self.targets[idx], axis=1) < self.radius
+                out[idx] = (np.linalg.norm(pos[idx] - self.targets[idx], axis=1) < self.radius) | stalled[idx]
         return out
 
     def _depth(self, j: int, spacing: float) -> float:
