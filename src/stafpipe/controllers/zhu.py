@@ -139,11 +139,9 @@ class ZhuController(Controller):
         the path's point `team_lookahead` ahead of the team centre's projection on it, if that is short of p_r, and
         the heading there."""
         ref, heading = self.reference()
-        if not self.cfg.team_reference or len(members) == self.n:
+        if not self.cfg.team_reference or not self._blind(members, p):
             return ref, heading
         centre = p[members].mean(axis=0)
-        if float(np.linalg.norm(centre - ref)) <= self.cfg.max_lag or self.geometry.visible(centre, ref, SIGHT_GAP):
-            return ref, heading
         if self.cfg.team_wait > 0 and self._now - self._blind_since.get(tuple(members), self._now) < self.cfg.team_wait:
             return ref, heading
         ahead = self.cfg.team_lookahead
@@ -158,14 +156,19 @@ class ZhuController(Controller):
         self._now = t
         if not self.cfg.team_reference or self.cfg.team_wait <= 0:
             return
+        blind = [tuple(m) for m in self.teams.values() if self._blind(m, p)]
+        self._blind_since = {key: self._blind_since.get(key, t) for key in blind}
+
+    def _blind(self, members: list[int], p: np.ndarray) -> bool:
+        """Whether team `members` (not the whole team) stands more than max_lag from p_r and its centre's straight way
+        to p_r crosses an obstacle."""
+        if len(members) == self.n:
+            return False
         ref, _ = self.reference()
-        blind = {}
-        for members in self.teams.values():
-            key, centre = tuple(members), p[members].mean(axis=0)
-            far = len(members) < self.n and float(np.linalg.norm(centre - ref)) > self.cfg.max_lag
-            if far and not self.geometry.visible(centre, ref, SIGHT_GAP):
-                blind[key] = self._blind_since.get(key, t)
-        self._blind_since = blind
+        centre = p[members].mean(axis=0)
+        return float(np.linalg.norm(centre - ref)) > self.cfg.max_lag and not self.geometry.visible(
+            centre, ref, SIGHT_GAP
+        )
 
     def _at_goal(self) -> bool:
         """p_r has reached the end of the team's path."""
