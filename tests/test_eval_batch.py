@@ -67,11 +67,11 @@ def test_a_world_that_finishes_early_is_left_alone(tmp_path) -> None:
     open_lane = dataclasses.replace(
         spec,
         obstacles=[],
-        team=TeamSpec(n=4, formation="square", spacing=1.0, start=(3.0, 6.0), goal=(8.0, 6.0), heading_deg=0.0),
+        team=TeamSpec(n=4, formation="square", spacing=1.5, start=(3.0, 6.0), goal=(8.0, 6.0), heading_deg=0.0),
         reference_path=[],
         time_limit=20.0,
     )
-    scenario = build_scenario(open_lane)
+    scenario = build_scenario(open_lane)  # 1.5 m apart: straight-line robots starting 0.4 m off their slots never meet
     batched, alone = _both_ways("straight", scenario, WorldConfig(start_noise=0.4), tmp_path)
     assert all(_same(a, b) for a, b in zip(batched, alone, strict=True))
     assert len({r["tt"] for r in alone}) > 1 and all(r["sr"] == 1.0 for r in alone)

@@ -48,6 +48,27 @@ def test_walls_hold_a_robot_and_the_contact_is_counted() -> None:
     assert hits >= 1 and worlds.collided[0].all()
 
 
+def test_robots_told_to_stand_still_stand_still_in_an_episodes_first_step() -> None:
+    # pymunk carries a contact's position correction into the next step: the robots stacked at the origin when a world
+    # is built, or pressed into a wall at the end of the last episode, once moved by up to 0.3 m in the first step.
+    team = TeamSpec(n=4, formation="line", spacing=1.0, start=[2.0, 2.5], goal=[8.0, 2.5], heading_deg=90)
+    sc = build_scenario(ScenarioConfig(name="box", world=WorldBounds(xmax=10.0, ymax=5.0), team=team))
+    worlds = Worlds([corridor()])
+    worlds.reset([0])
+    start = worlds.pos.copy()
+    worlds.step(np.zeros((1, 10, 2)))
+    assert np.abs(worlds.pos - start).max() < 1e-9
+    worlds = Worlds([sc])
+    worlds.reset([0])
+    for _ in range(60):  # into the wall and each other
+        worlds.step(np.full((1, 4, 2), -1.0))
+    assert worlds.collided[0].any()
+    worlds.reset([1])
+    start = worlds.pos.copy()
+    worlds.step(np.zeros((1, 4, 2)))
+    assert np.abs(worlds.pos - start).max() < 1e-9
+
+
 def test_holonomic_limits_speed_and_acceleration() -> None:
     worlds = Worlds([corridor()])
     worlds.reset([0])
