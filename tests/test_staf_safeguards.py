@@ -115,6 +115,11 @@ def test_follow_order_swaps_only_robots_standing_the_other_way_round() -> None:
     assert follow_order(rank, np.array([2.0, 3.0, 0.0, 1.0]), 0.2, until=1.5).tolist() == [0, 1, 3, 2]
     # from a wedge's slots: the tip first, then left to right
     assert column_rank(np.array([[0.0, 0.0], [-1.0, 1.0], [-1.0, -1.0]])).tolist() == [0, 1, 2]
+    # a line abreast (left at +y): left to right, or (`plan.inside_out`) the middle first, then outwards, left first
+    line = np.array([[0.0, -2.0], [0.0, -1.0], [0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])
+    assert column_rank(line).tolist() == [4, 3, 2, 1, 0]
+    assert column_rank(line, inside_out=True).tolist() == [4, 2, 0, 1, 3]
+    assert column_rank(np.array([[0.0, 0.0], [-1.0, 1.0], [-1.0, -1.0]]), inside_out=True).tolist() == [0, 1, 2]
 
 
 def _five_behind(pos, goal, m):  # the split of an episode on the exit-turn map: robots 0-4 wait, 5-7 go first

@@ -108,6 +108,10 @@ class PlanConfig:
     """With `in_world` and `target_gap`: targets are pushed apart inside the world's bounds (`separated(bounds=)`);
     false: pushed apart first and clipped to the bounds after, as the shipped policy was trained, which could bring
     two targets at the world's edge back to 0.12 m apart, and their robots into contact (docs/staf.md)."""
+    inside_out: bool = False
+    """The order in which a row of a subteam files into its column (`plan_geometry.column_rank`): true, the robot
+    nearest the path first, then outwards, left before right (a line abreast files in like a zip); false: from left
+    to right, as trained (docs/staf.md)."""
     short_of_ahead: float = 0.0
     """> 0: a target within 2r + this of a robot of its own subteam further along the path is put that far short of
     that robot, on the follower's side, so no robot aims into the one ahead of it (a column turning towards a door

@@ -75,16 +75,23 @@ def unit_slots(kind: str, k: int, angle_deg: float) -> np.ndarray:
 
 
 def subteam_shape(
-    k: int, kind: str, angle_deg: float, spacing: float, radius: float, file_weights: Callable[[np.ndarray], np.ndarray]
+    k: int,
+    kind: str,
+    angle_deg: float,
+    spacing: float,
+    radius: float,
+    file_weights: Callable[[np.ndarray], np.ndarray],
+    inside_out: bool = False,
 ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """(unit-spacing slots, depth along the path, single-file weights, column ranks) of a k-robot subteam of the STAF
-    plan; `file_weights(unit slots)` says where along the path it walks in single file."""
+    plan; `file_weights(unit slots)` says where along the path it walks in single file; `inside_out`: `column_rank`'s
+    order."""
     unit = unit_slots(kind, k, angle_deg)
     depth = extent(unit * spacing, radius)[0]
     weights = file_weights(unit)
     if weights.any():  # room for the column the subteam becomes in single file
         depth = max(depth, (k - 1) * spacing + 2 * radius)
-    rank = column_rank(unit)
+    rank = column_rank(unit, inside_out)
     weights.flags.writeable = rank.flags.writeable = False  # shared by every subteam of k robots
     return unit, depth, weights, rank
 
@@ -134,12 +141,15 @@ def unblocked_order(order: list[np.ndarray], progress: np.ndarray, lateral: np.n
     return list(min(permutations(order), key=lambda o: blocked_ways(progress, lateral, list(o), radius)))
 
 
-def column_rank(slots: np.ndarray) -> np.ndarray:
+def column_rank(slots: np.ndarray, inside_out: bool = False) -> np.ndarray:
     """(k,) each robot's place in its subteam's column (0 at the front) from its unit-spacing formation slot (k, 2):
     the slot furthest ahead first, then from left to right, so that blending from the formation does not cross
-    ways."""
+    ways; `inside_out`: within a row, the slot nearest the path first, then outwards, left before right (a line
+    abreast files in like a zip, its ends last)."""
     rank = np.empty(len(slots), dtype=int)
-    rank[np.lexsort((-slots[:, 1], -np.round(slots[:, 0], 6)))] = np.arange(len(slots))
+    ahead = -np.round(slots[:, 0], 6)
+    keys = (-slots[:, 1], np.round(np.abs(slots[:, 1]), 6), ahead) if inside_out else (-slots[:, 1], ahead)
+    rank[np.lexsort(keys)] = np.arange(len(slots))
     return rank
 
 

@@ -69,7 +69,7 @@ class StafPlan:
         alone = narrow.any() and self.m_wanted <= 1
         self.file_weight = self._file_weights(self.full_slots / self.spacing) if alone else self.clear * 0.0
         # a k-robot subteam's layout depends on k alone: worked out once per episode, not in the step that splits
-        shape = (self.kind, self.angle, self.spacing, self.radius, self._file_weights)
+        shape = (self.kind, self.angle, self.spacing, self.radius, self._file_weights, self.cfg.inside_out)
         self.subteam_shapes = [geo.subteam_shape(k, *shape) for k in range(self.n + 1)] if self.m_wanted > 1 else []
         self.reset()
 
@@ -99,7 +99,7 @@ class StafPlan:
         self.merging = False
         self.hold: list[np.ndarray | None] = [None]
         self.file_weights = [self.file_weight]  # per subteam: where it walks in single file
-        self.ranks = [column_rank(self.slots[0])]  # per subteam: each robot's place in its column (0: the front)
+        self.ranks = [column_rank(self.slots[0], self.cfg.inside_out)]  # per subteam: each robot's column place
         self.goal = self.goal_slots.copy()
         self.events: list[tuple[str, list[int], str]] = []
         self.targets = self.goal.copy()
@@ -203,7 +203,7 @@ class StafPlan:
         """`plan.start_slots`: robots take the team's slots laid along the path nearest to them (Hungarian)."""
         perm = assign_slots(pos, place(self.full_slots, *self.frame.at(self.anchor[0])))
         self.slots[0] = self.full_slots[perm] / self.spacing
-        self.ranks[0] = column_rank(self.slots[0])
+        self.ranks[0] = column_rank(self.slots[0], self.cfg.inside_out)
 
     def _split(self, pos: np.ndarray, progress: np.ndarray) -> None:
         self.split_done = True
