@@ -20,8 +20,7 @@ from typing import cast
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
-from stafpipe.controllers.orca import orca_velocities
-from stafpipe.controllers.zhu_config import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY
+from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY, orca_velocities
 from stafpipe.errors import require
 from stafpipe.formations import rotation
 from stafpipe.geometry import Geometry, path_parts, point_ahead

@@ -18,6 +18,10 @@ import numpy as np
 from stafpipe.sensing import Observation
 
 _EPS = 1e-9
+# ORCA's settings as method=zhu, L&F and the `orca` teacher use them by default
+ORCA_HORIZON = 1.0  # s: velocities keep every neighbour clear for this long
+ORCA_MARGIN = 0.1  # m, added to the robots' and obstacles' radii
+ORCA_RECOVERY = 0.1  # s in which two robots that touch are separated (the world's control period)
 Vec = tuple[float, float]
 Line = tuple[float, float, float, float]
 """A half-plane of velocities: a point on its boundary (px, py) and the boundary's direction (dx, dy); the left side

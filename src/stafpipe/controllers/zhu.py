@@ -88,6 +88,7 @@ class ZhuController(Controller):
         self.path_parts = path_parts(self.path)  # for the teams' own references (`team_reference`)
         self.geometry = Geometry.of(team.scenario)
         self._blind_since: dict[tuple[int, ...], float] = {}
+        self._sight: dict[tuple[int, ...], bool] = {}  # `_blind` of each team in this control step
         self._now = 0.0
         self.s_ref = 0.0
         self._ref: tuple[float, np.ndarray, float] | None = None
@@ -153,7 +154,7 @@ class ZhuController(Controller):
     def _watch_sight(self, p: np.ndarray, t: float) -> None:
         """With `team_wait`: since when each team (but the whole team) has stood more than max_lag from p_r with its
         straight way to p_r crossing an obstacle; a team that sees p_r, or is near it, starts afresh."""
-        self._now = t
+        self._now, self._sight = t, {}
         if not self.cfg.team_reference or self.cfg.team_wait <= 0:
             return
         blind = [tuple(m) for m in self.teams.values() if self._blind(m, p)]
@@ -161,14 +162,15 @@ class ZhuController(Controller):
 
     def _blind(self, members: list[int], p: np.ndarray) -> bool:
         """Whether team `members` (not the whole team) stands more than max_lag from p_r and its centre's straight way
-        to p_r crosses an obstacle."""
-        if len(members) == self.n:
-            return False
-        ref, _ = self.reference()
-        centre = p[members].mean(axis=0)
-        return float(np.linalg.norm(centre - ref)) > self.cfg.max_lag and not self.geometry.visible(
-            centre, ref, SIGHT_GAP
-        )
+        to p_r crosses an obstacle; worked out once per team and control step (`_watch_sight` starts each step afresh:
+        the regions and the formation control both ask)."""
+        key = tuple(members)
+        if key not in self._sight:
+            ref, _ = self.reference()
+            centre = p[members].mean(axis=0)
+            far = len(members) < self.n and float(np.linalg.norm(centre - ref)) > self.cfg.max_lag
+            self._sight[key] = far and not self.geometry.visible(centre, ref, SIGHT_GAP)
+        return self._sight[key]
 
     def _at_goal(self) -> bool:
         """p_r has reached the end of the team's path."""

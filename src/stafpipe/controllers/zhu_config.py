@@ -6,12 +6,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY
 from stafpipe.errors import require
-
-# ORCA's settings (controllers/orca.py) as method=zhu uses them by default, shared with L&F and the `orca` teacher
-ORCA_HORIZON = 1.0  # s: velocities keep every neighbour clear for this long
-ORCA_MARGIN = 0.1  # m, added to the robots' and obstacles' radii
-ORCA_RECOVERY = 0.1  # s in which two robots that touch are separated (the world's control period)
 
 
 @dataclass

@@ -26,9 +26,8 @@ import numpy as np
 
 from stafpipe.controllers.base import STOP_GAP, limit_approach
 from stafpipe.controllers.lf import LFConfig
-from stafpipe.controllers.orca import orca_velocities
+from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY, orca_velocities
 from stafpipe.controllers.plan_config import PlanConfig
-from stafpipe.controllers.zhu_config import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY
 from stafpipe.learning.features import to_robot_frame
 from stafpipe.sensing import Observation
 
