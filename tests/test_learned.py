@@ -339,6 +339,40 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(("top_speed", "recorded", "driven"), [(2.0, 1.0, 1.0), (0.5, 1.0, 0.5), (2.0, None, 2.0)])
+def test_robots_faster_than_the_training_robots_are_driven_no_faster(tmp_path, top_speed, recorded, driven) -> None:
+    """The network's action is a fraction of the top speed of the robots it was trained with (`made_by.max_speed`):
+    robots of twice that speed get the trained robots' commands, slower robots their own fraction of it, and a
+    record without the speed (written before it was kept) the robot's own top speed, as before."""
+    from stafpipe.controllers.dgnn import DGNNConfig
+    from stafpipe.learning.checkpoint import save_policy
+
+    base = load_named_scenario("corridor")
+    sc = build_scenario(dataclasses.replace(base.spec, robot=dataclasses.replace(base.spec.robot, max_speed=top_speed)))
+    policy, made_by = load_policy("", "dgnn")
+    assert made_by["max_speed"] == 1.0  # the shipped network was trained on generated maps of 1 m/s robots
+    if recorded is None:
+        made_by.pop("max_speed")
+    ctrl = make_controller(DGNNConfig(checkpoint=str(save_policy(tmp_path / "policy.pt", "dgnn", policy, made_by))))
+    worlds = Worlds([sc], SensingConfig())
+    obs = worlds.reset([3])
+    team = _team(sc, worlds)
+    ctrl.reset(team)
+    adapter = ADAPTERS["dgnn"](ctrl.policy.cfg, TrainPPOConfig().reward, None, 2.0)
+    adapter.begin([team])
+    fastest = 0.0
+    for _ in range(30):
+        f = adapter.step(obs, 0.1 if worlds.time[0] > 0 else 0.0).features
+        with torch.no_grad():
+            mean, _ = ctrl.policy(torch.from_numpy(f.own), torch.from_numpy(f.edge), torch.from_numpy(f.mask))
+        command = ctrl.act(obs.world(0))
+        assert np.allclose(command, rollout.commands(mean.numpy(), worlds.heading, driven)[0], atol=1e-5)
+        fastest = max(fastest, float(np.linalg.norm(command, axis=-1).max()))
+        obs, _ = worlds.step(command[None])
+    # the network asks for speed here; each robot-frame component is clipped to `driven`, so no more than sqrt(2) x it
+    assert driven * 0.5 < fastest <= math.sqrt(2) * driven + 1e-9
+
+
 def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> None:
     assert (
         launch(
@@ -367,6 +401,7 @@ def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> Non
     _policy, made_by = load_policy(workdir / "train" / "policy.pt", "staf")
     assert made_by["training_maps"] == sorted(made_by["training_maps"]) and len(made_by["training_maps"]) == 2
     assert all(name.startswith("gen5_") for name in made_by["training_maps"])
+    assert made_by["max_speed"] == 1.0  # the generated maps' robots
     assert launch("train-ppo", ["train_ppo.scenarios=[maps/nothing_here]", "train_ppo.iterations=1"]) == 2
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import zlib
 from typing import Any
 
@@ -83,9 +84,16 @@ class LearnedController(Controller):
         # averaged")
         paths = ensemble_paths(cfg.checkpoint, getattr(cfg, "ensemble", []), cfg.name)
         self._acts = [self.policy.frozen_act()]
+        speeds = [self.made_by.get("max_speed")]
         for k, (path, member, made_by) in enumerate(load_members(paths, self.policy, cfg.name, "method.ensemble")):
             self._check_made_by(f"method.ensemble[{k}] ({path})", made_by)
             self._acts.append(member.frozen_act())
+            speeds.append(made_by.get("max_speed"))
+        # A network's action is a fraction of the top speed of the robots it was trained with (`made_by.max_speed`):
+        # robots faster than those are driven no faster, since the network's braking was learned at that speed
+        # (docs/decisions.md, "Robots faster than the training's"); a record without it: the robot's own top speed
+        known = [float(v) for v in speeds if v is not None]
+        self.trained_speed = min(known) if known else math.inf
         if paths:  # the run's config may leave `method.ensemble` unset: its log says what acted
             runs = [cfg.checkpoint or f"shipped:{cfg.name}", *paths]
             log.info("%s acts with the mean action of %d runs: %s", cfg.name, len(runs), ", ".join(runs))
@@ -96,7 +104,8 @@ class LearnedController(Controller):
         # another trajectory (measured: DGNN's corridor wedge, 1 vs 2 threads, other TT in 4 of 5 episodes). With
         # one thread the seed fixes the episode on any number of cores; these networks are no slower with it.
         torch.set_num_threads(1)
-        self.max_speed = 1.0
+        self.max_speed = self.command_speed = 1.0
+        self._capped_at = math.inf  # the cap last logged (once per eval, not per episode)
         self.last_time = 0.0
 
     def _check_made_by(self, where: str, made_by: dict[str, Any]) -> None:
@@ -133,6 +142,15 @@ class LearnedController(Controller):
         """Every world's episode in the one adapter, so that each step computes the batch's features in one pass."""
         self.n = len(teams[0].start)
         self.max_speed = teams[0].scenario.spec.robot.max_speed
+        self.command_speed = min(self.max_speed, self.trained_speed) if self.teacher == "learned" else self.max_speed
+        if self.command_speed < self.max_speed and self.command_speed != self._capped_at:
+            self._capped_at = self.command_speed
+            log.info(
+                "%s: robots of top speed %g m/s are driven at most %g m/s, the top speed the network was trained with",
+                self.cfg.name,
+                self.max_speed,
+                self.command_speed,
+            )
         self.adapter.begin(teams)
         self.last_time = 0.0
         self._worlds = [Controller() for _ in teams]  # each world's subteams, targets and events
@@ -169,7 +187,7 @@ class LearnedController(Controller):
             with torch.inference_mode():  # execution: no critic, no autograd bookkeeping
                 for w in np.flatnonzero(active).tolist():
                     action[w] = self._world_mean(f, w).numpy()
-        out = commands(action, obs.heading, self.max_speed)
+        out = commands(action, obs.heading, self.command_speed)
         out[~active] = 0.0
         return out
 

@@ -199,6 +199,8 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         "sensing": OmegaConf.to_container(cfg.sensing, resolve=True),
         "world": OmegaConf.to_container(cfg.world, resolve=True),
         "training_maps": sorted({s.name for s in pool}),
+        # the top speed the actions are fractions of: faster robots are driven no faster (controllers/learned.py)
+        "max_speed": max(float(s.spec.robot.max_speed) for s in pool),
         "commit": commit(),
         "iterations": len(history),
         "final": history[-1] if history else {},
