@@ -50,7 +50,7 @@ def test_guide_targets_follow_the_path_then_release_to_the_goal() -> None:
     path = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
     pos = np.array([[2.0, 1.0], [9.0, -1.0], [10.5, 7.0]])
     goal = np.array([[12.0, 12.0], [8.0, 12.0], [11.0, 10.0]])
-    got = guide_targets(pos, goal, path, lookahead=2.0, release=4.0)
+    got = guide_targets(pos, goal, path, lookahead=2.0, release=4.0)[0]
     # robot 0 projects to arc 2 -> 4 ahead: (4, 0); robot 1 to arc 9 -> 11: (10, 1); robot 2 to arc 17, 3 from the end
     assert np.allclose(got, [[4.0, 0.0], [10.0, 1.0], [11.0, 10.0]])
 

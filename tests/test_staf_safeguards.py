@@ -143,6 +143,7 @@ def test_a_column_placed_the_other_way_round_follows_its_robots(tmp_path) -> Non
         slots = plan.slots[j].copy()
         behind = plan.frame.at(s - 1.0 * np.arange(len(idx))[::-1])[0]  # ... but standing at the back
         pos[idx] = behind
+        plan.tracked = plan.frame.progress(pos)  # the robots put there, not walked there (`plan.track_progress`)
         targets = plan._step(pos, 0.0)[idx]
         order = np.argsort(-plan.frame.progress(targets))  # robots from the front target to the back one
         assert (order.tolist() == list(range(len(idx) - 1, -1, -1))) == reorder

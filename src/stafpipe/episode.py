@@ -18,7 +18,7 @@ from stafpipe.controllers.plan_geometry import extent, lateral_clearance
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
 from stafpipe.faults import ROBOT_FAULTS
 from stafpipe.geometry import Geometry, PathFrame, capsule_arrays, closest_points, path_length
-from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance
+from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance, route_done
 from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds
@@ -93,6 +93,7 @@ def episode_context(
         sensing_radius=sensing.radius,
         cfi_margin=cfi_margin,
         occlusion=sensing.occlusion,
+        route=tuple(tuple(map(float, p)) for p in scenario.spec.reference_path),
     )
     return ctx, path
 
@@ -203,6 +204,14 @@ class _Recorder:
         )
 
 
+def _passed(pos: np.ndarray, route: np.ndarray) -> int:
+    """How many of `route`'s next waypoints robots at `pos` (n, 2) pass where they stand (`metrics.route_done`)."""
+    k = 0
+    while k < len(route) and route_done(pos[None], route[k : k + 1]) == 0:
+        k += 1
+    return k
+
+
 def run_episodes(
     scenario: Scenario,
     geometry: Geometry,
@@ -236,6 +245,9 @@ def run_episodes(
             rec.log.info(method, seed, text, asdict(ctx), worlds.goal[w])
         rec.record(worlds, w, controller.world_view(w), 0)
     active = np.ones(len(seeds), dtype=bool)
+    route = np.array(ctx.route, dtype=float).reshape(-1, 2)
+    # reference waypoints each world's team has passed, from its start on (as metrics.route_done counts them)
+    passed = np.array([_passed(worlds.pos[w], route) for w in range(len(seeds))], dtype=int)
     steps = int(round(scenario.spec.time_limit / world_cfg.control_dt))
     for step in range(1, steps + 1):
         actions = controller.act_worlds(obs, active)
@@ -245,7 +257,8 @@ def run_episodes(
             rec.record(worlds, w, controller.world_view(w), step)
             for c in events[w]:
                 rec.collided(step, c.a, c.b)
-            if matched_goal_distance(worlds.pos[w], worlds.goal[w]).max() <= goal_tolerance:
+            passed[w] += _passed(worlds.pos[w], route[passed[w] :])
+            if passed[w] == len(route) and matched_goal_distance(worlds.pos[w], worlds.goal[w]).max() <= goal_tolerance:
                 active[w] = False
         if not active.any():
             break

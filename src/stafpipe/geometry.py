@@ -320,13 +320,19 @@ class PathFrame:
         point = self.path[k] + (s - self.cum[k])[..., None] * self.unit[k]
         return point, self.heading[k]
 
-    def progress(self, points: np.ndarray) -> np.ndarray:
-        """Arc length (P,) of each point's projection on the path."""
+    def progress(self, points: np.ndarray, near: np.ndarray | None = None, window: float = 2.0) -> np.ndarray:
+        """Arc length (P,) of each point's projection on the path: on the nearest segment, or with `near` (P,) on the
+        nearest of the segments that reach within `window` m of arc length of near[p] (a path that comes back close
+        to itself, a loop or a hairpin round a thin wall, then keeps each point on its own part of the way)."""
         t = np.einsum("pkd,kd->pk", points[:, None] - self.path[None, :-1], self.unit)
         t = np.minimum(np.maximum(t, self.seg_from), self.seg_len)
         proj = self.path[None, :-1] + t[..., None] * self.unit[None]
-        off = points[:, None] - proj
-        k = lengths(off).argmin(axis=1)
+        off = lengths(points[:, None] - proj)
+        if near is not None:
+            below = np.where(np.isinf(self.seg_from), -np.inf, self.cum[:-1])  # an extended first segment: all behind
+            far = (self.cum[None, 1:] < near[:, None] - window) | (below[None] > near[:, None] + window)
+            off = np.where(far, np.inf, off)
+        k = off.argmin(axis=1)
         return self.cum[k] + t[np.arange(len(points)), k]
 
     def lateral(self, points: np.ndarray, progress: np.ndarray | None = None) -> np.ndarray:
@@ -351,15 +357,25 @@ def path_parts(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def point_ahead(
-    path: np.ndarray, points: np.ndarray, ahead: float, parts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    path: np.ndarray,
+    points: np.ndarray,
+    ahead: float,
+    parts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    near: np.ndarray | None = None,
+    window: float = 2.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each point (P, 2): the point `ahead` metres beyond its projection on the polyline `path` (K, 2) (capped at
     the end), the path's unit direction there, and the arc length still left after the projection; `parts`:
-    `path_parts(path)` where the caller has them."""
+    `path_parts(path)` where the caller has them; `near` (P,): project on the segments within `window` m of arc
+    length of near[p] only (as `PathFrame.progress`: a route that comes back near itself)."""
     seg, length, cum = path_parts(path) if parts is None else parts
     t = np.clip(np.einsum("pkd,kd->pk", points[:, None] - path[None, :-1], seg) / length**2, 0.0, 1.0)
     proj = path[None, :-1] + t[..., None] * seg[None]
-    k = np.linalg.norm(points[:, None] - proj, axis=-1).argmin(axis=1)
+    off = np.linalg.norm(points[:, None] - proj, axis=-1)
+    if near is not None:
+        far = (cum[None, 1:] < near[:, None] - window) | (cum[None, :-1] > near[:, None] + window)
+        off = np.where(far, np.inf, off)
+    k = off.argmin(axis=1)
     arc = cum[k] + t[np.arange(len(points)), k] * length[k]
     target = np.minimum(arc + ahead, cum[-1])
     j = np.clip(np.searchsorted(cum, target, side="right") - 1, 0, len(seg) - 1)

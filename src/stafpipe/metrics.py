@@ -73,6 +73,30 @@ class MetricContext:
     passages: tuple = ()
     """((from, to), ...) arc lengths along `path` where the whole team in its formation does not fit across the free
     width (`episode.narrow_stretches`): where CFI's gap term has a gap to judge (`cfi_passage_*`)."""
+    route: tuple = ()
+    """The scenario's reference waypoints ((x, y), ...) the team must pass, in order, before its goal counts (empty:
+    none; `route_done`)."""
+
+
+ROUTE_REACH = 1.0
+"""m: a reference waypoint counts as passed once the team's centroid or one of its robots has come this close
+(`route_done`; chosen, not tuned: a robot's spacing in the paper's formations). docs/metrics.md."""
+
+
+def route_done(positions: np.ndarray, route, reach: float = ROUTE_REACH) -> int:
+    """Index of the first sample (of `positions`, (T, n, 2)) by which the team has passed every waypoint of `route`,
+    in order: 0 without a route, T if it never does. A route that comes back near its start (Zhu et al. 2019,
+    Scenario 1) would otherwise count a team that never left as arrived."""
+    k = 0
+    for waypoint in route:
+        w = np.asarray(waypoint, float)
+        rest = positions[k:]
+        near = np.minimum(np.linalg.norm(rest.mean(axis=1) - w, axis=-1), np.linalg.norm(rest - w, axis=-1).min(axis=1))
+        hits = np.flatnonzero(near <= reach)
+        if not len(hits):
+            return len(positions)
+        k += int(hits[0])
+    return k
 
 
 def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
@@ -87,6 +111,7 @@ def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
 def success_rate(traj: Trajectory, ctx: MetricContext) -> float:
     """SR: fraction of robots within tolerance of a goal slot at the end, that never collided."""
     at_goal = matched_goal_distance(traj.positions[-1], traj.team_goal) <= ctx.goal_tolerance
+    at_goal &= route_done(traj.positions, ctx.route) < len(traj.positions)  # the route passed, if it has one
     hit = np.zeros(traj.positions.shape[1], dtype=bool)
     for _, a, b in traj.collisions:
         hit[a] = True
@@ -96,8 +121,10 @@ def success_rate(traj: Trajectory, ctx: MetricContext) -> float:
 
 
 def travel_time(traj: Trajectory, ctx: MetricContext) -> float:
-    """TT: first time at which every robot is within tolerance of a goal slot; NaN if that never happens."""
+    """TT: first time at which every robot is within tolerance of a goal slot, the route passed (`route_done`); NaN if
+    that never happens."""
     done = np.flatnonzero((traj.goal_distance <= ctx.goal_tolerance).all(axis=1))
+    done = done[done >= route_done(traj.positions, ctx.route)]
     return float(traj.time[done[0]]) if len(done) else math.nan
 
 
@@ -107,10 +134,11 @@ def travel_time_of_arrivals(traj: Trajectory, ctx: MetricContext) -> float:
     for L&F although its SR is 40-70 %: this is our reading of it (docs/metrics.md)."""
     distance = traj.goal_distance
     arrived = distance[-1] <= ctx.goal_tolerance
-    if not arrived.any():
+    passed = route_done(traj.positions, ctx.route)
+    if not arrived.any() or passed >= len(distance):
         return math.nan
     done = np.flatnonzero((distance[:, arrived] <= ctx.goal_tolerance).all(axis=1))
-    return float(traj.time[done[0]])
+    return float(traj.time[done[done >= passed][0]])
 
 
 def _group_terms(
@@ -179,12 +207,15 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext, memo: dict | None = No
     for _, a, b in traj.collisions:
         hit[[a, b] if b >= 0 else [a]] = True
     matched = traj.goal_distance
+    passed = route_done(traj.positions, ctx.route)
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
     out: dict[str, float] = {}
     for j, team in enumerate(np.unique(labels)):
         idx = np.flatnonzero(labels == team)
         done = np.flatnonzero((matched[:, idx] <= ctx.goal_tolerance).all(axis=1))
-        out[f"sub{j + 1}_sr"] = float(np.mean((matched[-1, idx] <= ctx.goal_tolerance) & ~hit[idx]))
+        done = done[done >= passed]
+        home = (matched[-1, idx] <= ctx.goal_tolerance) & (passed < len(matched))
+        out[f"sub{j + 1}_sr"] = float(np.mean(home & ~hit[idx]))
         out[f"sub{j + 1}_tt"] = float(traj.time[done[0]]) if len(done) else math.nan
         diam, eps = _group_terms(traj, ctx, np.array(split), idx, memo)
         for sigma in CFI_SIGMAS:

@@ -43,6 +43,7 @@ PLAN_SAFEGUARDS = (
     "start_slots",
     "hold_short",
     "sight_clear",
+    "track_progress",
 )
 """Plan settings that only keep targets from crossing, crowding, running into robots already home or leaving the world
 (docs/staf.md): a policy trained without them runs with them, so they are not compared with its training record."""

@@ -13,6 +13,7 @@ drive, whose motion is not the velocity ORCA chose, the approach speed towards r
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import cast
@@ -74,14 +75,19 @@ class LFController(Controller):
         self.slots = team.template - team.template.mean(axis=0)
         self.leader = int(self.slots[:, 0].argmax())
         self.heading = math.radians(spec.team.heading_deg)
-        start, goal = tuple(team.start[self.leader]), tuple(team.goal[self.leader])
+        # the leader's route: through the scenario's reference waypoints, as every method's team path goes (a route
+        # that loops back to near its start, Zhu et al.'s Scenario 1, was otherwise cut to its last 0.5 m)
+        route = [tuple(team.start[self.leader]), *map(tuple, spec.reference_path), tuple(team.goal[self.leader])]
+        geometry, keep = Geometry.of(team.scenario), self.radius + self.cfg.clearance_margin
         try:
-            self.path = Geometry.of(team.scenario).path_to(start, goal, self.radius + self.cfg.clearance_margin)
-        except ValueError:  # no path with the margin: fall back to the straight line (it will get stuck, honestly)
-            self.path = np.array([start, goal])
+            legs = [geometry.path_to(a, b, keep) for a, b in itertools.pairwise(route)]
+            self.path = np.concatenate([legs[0], *[leg[1:] for leg in legs[1:]]])
+        except ValueError:  # no path with the margin: fall back to straight lines (it will get stuck, honestly)
+            self.path = np.array(route, dtype=float)
         self.path_parts = path_parts(self.path)
         self.goal = team.goal
         self.lead_heard = np.array(team.start[self.leader], dtype=float)
+        self.lead_arc = 0.0  # the leader's arc length along its path (`point_ahead`'s `near`)
 
     def act(self, obs: Observation) -> np.ndarray:
         v = self._command(obs)
@@ -124,12 +130,18 @@ class LFController(Controller):
         if obs.heard[others, self.leader].any() or not obs.neighbours[others, self.leader].any():
             self.lead_heard = p[self.leader].copy()
         lead = p[self.leader]  # the leader knows where it is
-        points, directions, _ = point_ahead(self.path, lead[None], cfg.lookahead, self.path_parts)
+        # the leader's place on its path: near where it was a step before (a route that comes back near its start)
+        points, directions, left = point_ahead(
+            self.path, lead[None], cfg.lookahead, self.path_parts, near=np.array([self.lead_arc])
+        )
         point, direction = points[0], directions[0]
-        if np.linalg.norm(self.goal[self.leader] - lead) > cfg.lookahead:
+        self.lead_arc = float(self.path_parts[2][-1] - left[0])
+        to_goal = float(np.linalg.norm(self.goal[self.leader] - lead))
+        end = left[0] <= cfg.lookahead  # near the goal at the route's end, not only near it in the plane
+        if to_goal > cfg.lookahead or not end:
             self.heading = math.atan2(direction[1], direction[0])  # the formation turns with the leader's path
         slots = self.lead_heard + (self.slots - self.slots[self.leader]) @ rotation(self.heading).T
-        at_goal = np.linalg.norm(self.goal[self.leader] - lead) < 0.5 * cfg.lookahead
+        at_goal = to_goal < 0.5 * cfg.lookahead and end
         if at_goal:  # the leader has arrived: everyone takes its own goal slot
             slots = self.goal
         v = cfg.gain * (slots - p)

@@ -137,6 +137,12 @@ class PlanConfig:
     (Hungarian; robots are alike): a team whose formation faces another way than its path (`team.heading_deg` 180,
     or 0 on a map heading north) turns its formation on the way instead of every robot crossing the team to slot i;
     false: robot i keeps slot i, as trained (docs/staf.md)."""
+    track_progress: bool = True
+    """Each robot's progress along the path is the projection on the part of the path within 2 m of arc length of its
+    progress a step before (from the path's start at the first step): on a route that comes back near itself (Zhu et
+    al.'s Scenario 1 loop, whose goal lies 0.5 m from its start) the nearest point of the whole path put robots at the
+    start at its end; false: the nearest point of the whole path, as trained (docs/staf.md, "Routes that come back
+    near themselves")."""
     unblock: bool = True
     """At the split, the order of subteams with the fewest waiting robots met head-on (`plan_geometry.unblocked_order`;
     ties: the usual order, furthest ahead and nearest the path first); false: always the usual order, as trained."""

@@ -118,6 +118,7 @@ class StafPlan:
         self.unseen = np.zeros(self.n)  # seconds each robot's target has been out of its sight (`in_sight`)
         self.still = np.zeros(self.n)  # seconds each robot has stayed within 5 cm of `still_at` (`end_wait`)
         self.still_at = np.full((self.n, 2), np.inf)
+        self.tracked = np.zeros(self.n)  # each robot's progress a step before (`track_progress`): the start at first
 
     # -- the plan ---------------------------------------------------------------------------------------------
     def step(self, pos: np.ndarray, dt: float) -> np.ndarray:
@@ -170,7 +171,7 @@ class StafPlan:
         self.limits, self.weights = {}, {}
         if self.regrouped:
             return self._home(dt)
-        progress = self.frame.progress(pos)
+        progress = self.tracked = self.frame.progress(pos, self.tracked if self.cfg.track_progress else None)
         if self.anchor[0] < 0:
             self.anchor[0] = progress.sum() / self.n  # the mean (np.mean's own sum and division, no wrapper)
             if self.cfg.start_slots:

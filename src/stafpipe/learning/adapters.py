@@ -17,6 +17,7 @@ import numpy as np
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.staf_plan import StafPlan
+from stafpipe.geometry import path_length
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.features import Features, features, guide_targets, staf_features
@@ -105,6 +106,8 @@ class DGNNAdapter(Adapter):
         # the centred path, not TeamInfo.path (the shortest, one radius from the walls): guided along a shortest path
         # that hugs a wall, robots slid on it (docs/learning.md, "The guide path")
         self.paths = [self.centred(t) for t in teams] if self.policy.guide == "path" else []
+        self.arcs = np.zeros((len(teams), len(teams[0].start)))  # each robot's arc length along its path, from 0
+        self.lengths = [path_length(p) for p in self.paths]
 
     def step(self, obs: Observation, dt: float) -> Step:
         pc = self.policy
@@ -116,8 +119,10 @@ class DGNNAdapter(Adapter):
                 groups.setdefault(id(path), []).append(w)
             for ws in groups.values():
                 pos, own_goal = obs.position[ws].reshape(-1, 2), goal[ws].reshape(-1, 2)
-                guided = guide_targets(pos, own_goal, self.paths[ws[0]], pc.lookahead, pc.release)
+                path, near = self.paths[ws[0]], self.arcs[ws].reshape(-1)
+                guided, left = guide_targets(pos, own_goal, path, pc.lookahead, pc.release, near)
                 target[ws] = guided.reshape(len(ws), -1, 2)
+                self.arcs[ws] = (self.lengths[ws[0]] - left).reshape(len(ws), -1)
         else:
             target = goal
         self._aim = self._target = target  # a teacher steers where the network is guided

@@ -48,11 +48,20 @@ def to_robot_frames(vs: list[np.ndarray], c: np.ndarray, s: np.ndarray) -> np.nd
     return to_robot_frame(v, c[..., None], s[..., None]).reshape(v.shape[:-2] + (2 * len(vs),))
 
 
-def guide_targets(pos: np.ndarray, goal: np.ndarray, path: np.ndarray, lookahead: float, release: float) -> np.ndarray:
+def guide_targets(
+    pos: np.ndarray,
+    goal: np.ndarray,
+    path: np.ndarray,
+    lookahead: float,
+    release: float,
+    near: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """(n, 2) targets of one world's robots: the point `lookahead` ahead of each robot's projection on `path` (K, 2),
-    or the robot's own goal once its projection is within `release` of the path's end."""
-    point, _, left = point_ahead(path, pos, lookahead)
-    return np.where((left < release)[:, None], goal, point)
+    or the robot's own goal once its projection is within `release` of the path's end; and (n,) the arc length left
+    after each projection. `near` (n,): arc lengths near which to project (`point_ahead`: a route that comes back
+    near itself)."""
+    point, _, left = point_ahead(path, pos, lookahead, near=near)
+    return np.where((left < release)[:, None], goal, point), left
 
 
 def features(obs: Observation, goal_clip: float, sensing_radius: float, target: np.ndarray | None = None) -> Features:
