@@ -129,5 +129,36 @@ def test_lf_takes_orca_for_holonomic_robots_the_cap_for_differential_drive_and_r
         start, goal = slots + np.array(spec.team.start), slots + np.array(spec.team.goal)
         controller = LFController(LFConfig())
         controller.reset(TeamInfo(scenario, start, goal, slots, np.zeros((0, 2)), 2.4))
-        chosen[drive] = controller.orca
-    assert chosen == {"holonomic": True, "diff_drive": False}
+        chosen[drive] = (controller.orca, controller.forward)
+    assert chosen == {"holonomic": (True, False), "diff_drive": (False, True)}
+
+
+def test_differential_drive_followers_cap_the_motion_their_drive_makes() -> None:
+    """`local_planner=forward` (`auto`'s choice for differential drive since 2026-12-06): the approach cap also on
+    the motion the drive makes from the capped command. A line of ten through the corridor, 40 s: the cap alone let
+    followers turning towards slots beyond the wall drive into it (177 contact starts), the forward cap 12 and no
+    robot contact."""
+    import dataclasses
+
+    from stafpipe.controllers.lf import LFConfig, LFController
+    from stafpipe.episode import run_episode
+    from stafpipe.geometry import Geometry
+    from stafpipe.scenario import build_scenario
+    from stafpipe.sensing import SensingConfig
+    from stafpipe.stages.train_ppo import load_named_scenario
+    from stafpipe.world import WorldConfig
+
+    base = load_named_scenario("corridor").spec
+    spec = dataclasses.replace(
+        base,
+        team=dataclasses.replace(base.team, formation="line"),
+        robot=dataclasses.replace(base.robot, drive="diff_drive"),
+        time_limit=40.0,
+    )
+    sc = build_scenario(spec)
+    contacts = {}
+    for planner in ("cap", "forward"):
+        controller = LFController(LFConfig(local_planner=planner))
+        result = run_episode(sc, Geometry.of(sc), controller, "lf", 0, WorldConfig(), SensingConfig())
+        contacts[planner] = (result["collisions"], result["robot_collisions"])
+    assert contacts["cap"][0] > 100 and contacts["forward"][0] < 20 and contacts["forward"][1] == 0

@@ -148,3 +148,39 @@ def limit_approach(
         cut = active & (excess > 0)
         v = np.where(cut[..., None], v - excess[..., None] * normal, v)
     return v
+
+
+MIN_COMMAND_SCALE = 1e-3
+"""The smallest factor `forward_capped` scales a command by: the drive turns towards any command above 1e-6 m/s, so a
+robot whose forward motion is capped to nothing still turns round towards its aim instead of standing pointed at
+its neighbour."""
+
+
+def forward_capped(
+    world: np.ndarray,
+    obs: Observation,
+    radius: float,
+    avoid_distance: float,
+    avoid_gain: float,
+    stop_gap: float = STOP_GAP,
+) -> np.ndarray:
+    """World-frame commands (B, n, 2) of differential-drive robots scaled down so that the motion the drive makes
+    from them, forward along the heading at |command| x max(cos(heading error), 0) (drives.diff_drive), keeps the
+    approach cap of `limit_approach` (avoid_gain x (gap - stop_gap) within avoid_distance) towards every sensed robot
+    and the closest obstacle; the direction, and so the turn, is kept."""
+    heading = np.stack([np.cos(obs.heading), np.sin(obs.heading)], axis=-1)
+    forward = np.maximum((world * heading).sum(-1), 0.0)  # |command| x max(cos(error), 0)
+    dist = np.linalg.norm(obs.rel_position, axis=-1)
+    n = dist.shape[-1]
+    gaps = np.where(obs.neighbours & ~np.eye(n, dtype=bool), dist - 2 * radius, np.inf)
+    closing = (obs.rel_position * heading[..., None, :]).sum(-1) / np.maximum(dist, 1e-9)  # cos(heading, bearing)
+    wall_closing = (obs.obstacle * heading).sum(-1) / np.maximum(np.linalg.norm(obs.obstacle, axis=-1), 1e-9)
+    allowed = np.concatenate([gaps, obs.obstacle_distance[..., None]], axis=-1)
+    cosine = np.concatenate([closing, wall_closing[..., None]], axis=-1)
+    limit = np.where(
+        (allowed < avoid_distance) & (cosine > 1e-9),
+        np.maximum(avoid_gain * (allowed - stop_gap), 0.0) / np.maximum(cosine, 1e-9),
+        np.inf,
+    ).min(-1)  # the forward speed at which the closest-closing constraint is met exactly
+    scale = np.where(forward > limit, np.maximum(limit / np.maximum(forward, 1e-9), MIN_COMMAND_SCALE), 1.0)
+    return world * scale[..., None]

@@ -8,7 +8,8 @@ Followers: each tracks its slot = leader position + R(path heading) (slot_i - sl
 direction the leader moves, with a proportional gain. Collision avoidance (`local_planner`): for holonomic robots
 ORCA makes the control law's velocities collision-free (controllers/orca.py, as method=zhu's); for differential
 drive, whose motion is not the velocity ORCA chose, the approach speed towards robots and obstacles closer than
-`avoid_distance` is capped in proportion to the gap. Then the drive caps the speed.
+`avoid_distance` is capped in proportion to the gap, on the command and on the motion the drive makes from it. Then
+the drive caps the speed.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from typing import cast
 
 import numpy as np
 
-from stafpipe.controllers.base import Controller, TeamInfo, limit_approach
+from stafpipe.controllers.base import Controller, TeamInfo, forward_capped, limit_approach
 from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY, orca_velocities
 from stafpipe.errors import require
 from stafpipe.formations import rotation
@@ -47,12 +48,15 @@ class LFConfig:
     """Added to the robot radius as the leader path's clearance from obstacles (m)."""
     local_planner: str = "auto"
     """Collision avoidance: `orca` (ORCA, controllers/orca.py, with method=zhu's horizon 1 s, margin 0.1 m and
-    recovery 0.1 s), `cap` (the approach cap above; every robot until 2026-12-06), or `auto`: ORCA for holonomic
-    robots, the cap for differential drive (docs/baselines.md has both measured on either drive)."""
+    recovery 0.1 s), `cap` (the approach cap above; every robot until 2026-12-06), `forward` (the cap, and on a
+    differential drive the same cap on the motion the drive makes from the capped command, `base.forward_capped`), or
+    `auto`: ORCA for holonomic robots, `forward` for differential drive (since 2026-12-06; `cap` before).
+    docs/baselines.md has them measured."""
 
     def check(self, key: str = "method") -> None:
         lp = self.local_planner
-        require(lp in ("auto", "orca", "cap"), f"{key}.local_planner", "must be auto, orca or cap", lp)
+        planners = ("auto", "orca", "cap", "forward")
+        require(lp in planners, f"{key}.local_planner", "must be auto, orca, cap or forward", lp)
 
 
 class LFController(Controller):
@@ -67,6 +71,7 @@ class LFController(Controller):
         super().reset(team)
         spec = team.scenario.spec
         self.radius, self.max_speed = spec.robot.radius, spec.robot.max_speed
+        self.forward = spec.robot.drive == "diff_drive" and self.cfg.local_planner in ("forward", "auto")
         self.orca = self.cfg.local_planner == "orca" or (
             self.cfg.local_planner == "auto" and spec.robot.drive == "holonomic"
         )
@@ -102,7 +107,7 @@ class LFController(Controller):
                 ORCA_MARGIN,
                 self.mover_radius,
             )
-        return limit_approach(v, obs, self.radius, self.cfg.avoid_distance, self.cfg.avoid_gain)
+        return self._capped(v[None], Observation(*(np.asarray(x)[None] for x in obs)))[0]
 
     def act_worlds(self, obs: Observation, active: np.ndarray) -> np.ndarray:
         """As `act` in every active world, the collision avoidance of all of them in one call (world by world it was
@@ -117,8 +122,17 @@ class LFController(Controller):
             return super().act_worlds(obs, active)
         v = np.stack([c._command(obs.world(w)) for c, w in zip(copies, worlds.tolist(), strict=True)])
         batch = Observation(*(x[worlds] for x in obs))
-        out[worlds] = limit_approach(v, batch, radii.pop(), self.cfg.avoid_distance, self.cfg.avoid_gain)
+        out[worlds] = copies[0]._capped(v, batch)  # the batch's robots are alike (one radius, one drive)
         return out
+
+    def _capped(self, v: np.ndarray, obs: Observation) -> np.ndarray:
+        """The approach cap on the control law's velocities (`limit_approach`) and, with `forward` (and `auto`) on a
+        differential drive, on the motion the drive makes from them (`forward_capped`)."""
+        cfg = self.cfg
+        v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)
+        if self.forward:
+            v = forward_capped(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)
+        return v
 
     def _command(self, obs: Observation) -> np.ndarray:
         """The control law's velocities (n, 2) before collision avoidance."""

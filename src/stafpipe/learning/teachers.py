@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stafpipe.controllers.base import STOP_GAP, limit_approach
+from stafpipe.controllers.base import STOP_GAP, forward_capped, limit_approach
 from stafpipe.controllers.lf import LFConfig
 from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY, orca_velocities
 from stafpipe.controllers.plan_config import PlanConfig
@@ -115,7 +115,7 @@ def teacher_actions(
     if kind in ("avoiding", "sliding", "capped"):
         world = limit_approach(world, obs, radius, AVOID_DISTANCE, AVOID_GAIN, stop_gap)  # every world at once
         if kind in ("sliding", "capped") and drive == "diff_drive":
-            world = forward_capped(world, obs, radius, stop_gap)
+            world = forward_capped(world, obs, radius, AVOID_DISTANCE, AVOID_GAIN, stop_gap)
     elif kind == "orca":
         world = np.stack(
             [
@@ -124,35 +124,6 @@ def teacher_actions(
             ]
         )
     return to_robot_frame(world, np.cos(obs.heading), np.sin(obs.heading)) / max_speed
-
-
-MIN_COMMAND_SCALE = 1e-3
-"""The smallest factor `forward_capped` scales a command by: the drive turns towards any command above 1e-6 m/s, so a
-robot whose forward motion is capped to nothing still turns round towards its aim instead of standing pointed at
-its neighbour."""
-
-
-def forward_capped(world: np.ndarray, obs: Observation, radius: float, stop_gap: float = STOP_GAP) -> np.ndarray:
-    """World-frame commands (B, n, 2) of differential-drive robots scaled down so that the motion the drive makes
-    from them, forward along the heading at |command| x max(cos(heading error), 0) (drives.diff_drive), keeps the
-    approach cap of `limit_approach` (AVOID_GAIN x (gap - stop_gap) within AVOID_DISTANCE) towards every sensed robot
-    and the closest obstacle; the direction, and so the turn, is kept."""
-    heading = np.stack([np.cos(obs.heading), np.sin(obs.heading)], axis=-1)
-    forward = np.maximum((world * heading).sum(-1), 0.0)  # |command| x max(cos(error), 0)
-    dist = np.linalg.norm(obs.rel_position, axis=-1)
-    n = dist.shape[-1]
-    gaps = np.where(obs.neighbours & ~np.eye(n, dtype=bool), dist - 2 * radius, np.inf)
-    closing = (obs.rel_position * heading[..., None, :]).sum(-1) / np.maximum(dist, 1e-9)  # cos(heading, bearing)
-    wall_closing = (obs.obstacle * heading).sum(-1) / np.maximum(np.linalg.norm(obs.obstacle, axis=-1), 1e-9)
-    allowed = np.concatenate([gaps, obs.obstacle_distance[..., None]], axis=-1)
-    cosine = np.concatenate([closing, wall_closing[..., None]], axis=-1)
-    limit = np.where(
-        (allowed < AVOID_DISTANCE) & (cosine > 1e-9),
-        np.maximum(AVOID_GAIN * (allowed - stop_gap), 0.0) / np.maximum(cosine, 1e-9),
-        np.inf,
-    ).min(-1)  # the forward speed at which the closest-closing constraint is met exactly
-    scale = np.where(forward > limit, np.maximum(limit / np.maximum(forward, 1e-9), MIN_COMMAND_SCALE), 1.0)
-    return world * scale[..., None]
 
 
 def off_the_wall(to_aim: np.ndarray, obs: Observation) -> np.ndarray:
