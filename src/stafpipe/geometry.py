@@ -330,8 +330,7 @@ class PathFrame:
         off = lengths(points[:, None] - proj)
         if near is not None:
             below = np.where(np.isinf(self.seg_from), -np.inf, self.cum[:-1])  # an extended first segment: all behind
-            far = (self.cum[None, 1:] < near[:, None] - window) | (below[None] > near[:, None] + window)
-            off = np.where(far, np.inf, off)
+            off = np.where(beyond_window(below, self.cum[1:], near, window), np.inf, off)
         k = off.argmin(axis=1)
         return self.cum[k] + t[np.arange(len(points)), k]
 
@@ -356,6 +355,12 @@ def path_parts(path: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return seg, length, np.concatenate([[0.0], np.cumsum(length)])
 
 
+def beyond_window(start: np.ndarray, end: np.ndarray, near: np.ndarray, window: float) -> np.ndarray:
+    """(P, K) True where segment k, spanning arc lengths start[k]..end[k], lies wholly more than `window` m of arc
+    length from near[p]: the segments a point tracked along a path may not be projected on."""
+    return (end[None] < near[:, None] - window) | (start[None] > near[:, None] + window)
+
+
 def point_ahead(
     path: np.ndarray,
     points: np.ndarray,
@@ -373,8 +378,7 @@ def point_ahead(
     proj = path[None, :-1] + t[..., None] * seg[None]
     off = np.linalg.norm(points[:, None] - proj, axis=-1)
     if near is not None:
-        far = (cum[None, 1:] < near[:, None] - window) | (cum[None, :-1] > near[:, None] + window)
-        off = np.where(far, np.inf, off)
+        off = np.where(beyond_window(cum[:-1], cum[1:], near, window), np.inf, off)
     k = off.argmin(axis=1)
     arc = cum[k] + t[np.arange(len(points)), k] * length[k]
     target = np.minimum(arc + ahead, cum[-1])
