@@ -48,6 +48,15 @@ class Trajectory:
         TT, TT of arrivals and the subteams' metrics all read it)."""
         return np.stack([matched_goal_distance(p, self.team_goal) for p in self.positions])
 
+    def route_passed(self, route) -> int:
+        """`route_done` of these positions, worked out once per route (SR, TT, TT of arrivals and the subteams'
+        metrics all ask)."""
+        key = tuple(tuple(map(float, p)) for p in route)
+        memo = self.__dict__.setdefault("_route_passed", {})
+        if key not in memo:
+            memo[key] = route_done(self.positions, key)
+        return memo[key]
+
 
 @dataclass
 class MetricContext:
@@ -111,7 +120,7 @@ def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
 def success_rate(traj: Trajectory, ctx: MetricContext) -> float:
     """SR: fraction of robots within tolerance of a goal slot at the end, that never collided."""
     at_goal = matched_goal_distance(traj.positions[-1], traj.team_goal) <= ctx.goal_tolerance
-    at_goal &= route_done(traj.positions, ctx.route) < len(traj.positions)  # the route passed, if it has one
+    at_goal &= traj.route_passed(ctx.route) < len(traj.positions)  # the route passed, if it has one
     hit = np.zeros(traj.positions.shape[1], dtype=bool)
     for _, a, b in traj.collisions:
         hit[a] = True
@@ -124,7 +133,7 @@ def travel_time(traj: Trajectory, ctx: MetricContext) -> float:
     """TT: first time at which every robot is within tolerance of a goal slot, the route passed (`route_done`); NaN if
     that never happens."""
     done = np.flatnonzero((traj.goal_distance <= ctx.goal_tolerance).all(axis=1))
-    done = done[done >= route_done(traj.positions, ctx.route)]
+    done = done[done >= traj.route_passed(ctx.route)]
     return float(traj.time[done[0]]) if len(done) else math.nan
 
 
@@ -134,7 +143,7 @@ def travel_time_of_arrivals(traj: Trajectory, ctx: MetricContext) -> float:
     for L&F although its SR is 40-70 %: this is our reading of it (docs/metrics.md)."""
     distance = traj.goal_distance
     arrived = distance[-1] <= ctx.goal_tolerance
-    passed = route_done(traj.positions, ctx.route)
+    passed = traj.route_passed(ctx.route)
     if not arrived.any() or passed >= len(distance):
         return math.nan
     done = np.flatnonzero((distance[:, arrived] <= ctx.goal_tolerance).all(axis=1))
@@ -207,7 +216,7 @@ def subteam_metrics(traj: Trajectory, ctx: MetricContext, memo: dict | None = No
     for _, a, b in traj.collisions:
         hit[[a, b] if b >= 0 else [a]] = True
     matched = traj.goal_distance
-    passed = route_done(traj.positions, ctx.route)
+    passed = traj.route_passed(ctx.route)
     eta = ctx.passage_width - 2.0 * ctx.cfi_margin
     out: dict[str, float] = {}
     for j, team in enumerate(np.unique(labels)):
