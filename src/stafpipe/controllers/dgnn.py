@@ -35,6 +35,10 @@ class DGNNConfig:
     shipped DGNN's warm start, docs/learning.md)."""
     proportional_gain: float = 2.0
     """low_level other than learned: the step's gain (1/s)."""
+    avoid_movers: bool = True
+    """Moving obstacles avoided by the safety layer `method=staf` has (controllers/orca.py `avoid_movers`), so that
+    the two learned methods are compared alike; no effect on a map without movers (docs/staf.md, "Moving
+    obstacles")."""
 
     def check(self, key: str = "method") -> None:
         from stafpipe.learning.teachers import check_low_level

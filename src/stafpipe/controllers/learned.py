@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo
+from stafpipe.controllers.orca import avoid_movers
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
@@ -190,7 +191,18 @@ class LearnedController(Controller):
                     action[w] = self._world_mean(f, w).numpy()
         out = commands(action, obs.heading, self.command_speed)
         out[~active] = 0.0
+        if getattr(self.cfg, "avoid_movers", False):
+            self._avoid_movers(out, obs, active)
         return out
+
+    def _avoid_movers(self, out: np.ndarray, obs: Observation, active: np.ndarray) -> None:
+        """`method.avoid_movers`: in the worlds with moving obstacles, the commands with the movers avoided
+        (`orca.avoid_movers`; docs/staf.md, "Moving obstacles"). Worlds without any are left as they are."""
+        for w in np.flatnonzero(active).tolist():
+            spec = self.adapter.teams[w].scenario.spec
+            if spec.moving_obstacles:
+                radii = np.array([m.radius for m in spec.moving_obstacles])
+                out[w] = avoid_movers(out[w], obs.world(w), spec.robot.radius, self.command_speed, radii)
 
     def _world_mean(self, f: Any, w: int) -> torch.Tensor:
         """(n, 2) world w's action (its mean, or a sample from its own noise stream). One network call per world, on

@@ -187,12 +187,78 @@ def orca_velocities(
         for k in range(bounds[i], bounds[i + 1]):
             (qx, qy), (ux, uy) = pair_p[k], pair_v[k]
             lines.append(_line((qx, qy), (-ux, -uy), pair_radius, horizon, dt, 0.5, v_own))
-        for (mx, my, mvx, mvy), mr in zip(movers, mover_r, strict=False):  # movers sensed: at most len(mover_r)
-            qx, qy = mx - position[i][0], my - position[i][1]
-            if math.sqrt(qx * qx + qy * qy) < max_speed * horizon * 2 + mr:  # it can be reached in time
-                away = v_own[0] - mvx, v_own[1] - mvy
-                lines.append(_line((qx, qy), away, radius + mr + margin, horizon, dt, 1.0, v_own))
+        if movers:
+            lines += _mover_lines(movers, mover_r, position[i], v_own, radius, max_speed, horizon, dt, margin)
         count, result = _lp2(lines, max_speed, (prefs[i][0], prefs[i][1]), False)
+        if count < len(lines):
+            result = _lp3(lines, n_fixed, count, max_speed, result)
+        out[i] = result
+    return out
+
+
+def _mover_lines(
+    movers: list[list[float]],
+    mover_r: list[float],
+    at: list[float],
+    v_own: Vec,
+    radius: float,
+    max_speed: float,
+    horizon: float,
+    dt: float,
+    margin: float,
+) -> list[Line]:
+    """The half-planes of the moving obstacles (x, y, vx, vy rows) that can reach the robot at `at` within the
+    horizon; the robot takes all of the avoidance (a mover does not react)."""
+    lines = []
+    for (mx, my, mvx, mvy), mr in zip(movers, mover_r, strict=False):  # movers sensed: at most len(mover_r)
+        qx, qy = mx - at[0], my - at[1]
+        if math.sqrt(qx * qx + qy * qy) < max_speed * horizon * 2 + mr:  # it can be reached in time
+            away = v_own[0] - mvx, v_own[1] - mvy
+            lines.append(_line((qx, qy), away, radius + mr + margin, horizon, dt, 1.0, v_own))
+    return lines
+
+
+def avoid_movers(
+    pref: np.ndarray,
+    obs: Observation,
+    radius: float,
+    max_speed: float,
+    mover_radius: np.ndarray,
+    horizon: float = ORCA_HORIZON,
+    dt: float = ORCA_RECOVERY,
+    margin: float = ORCA_MARGIN,
+) -> np.ndarray:
+    """`pref` (n, 2) with only the moving obstacles avoided, ORCA's way: a robot that no mover can reach within the
+    horizon keeps its velocity to the bit; one that a mover can reach takes the velocity nearest its own that avoids
+    the mover and approaches the nearest static obstacle point no faster than ORCA allows (so that stepping aside
+    does not push it into a wall). A safety layer for methods that do not see a mover's velocity (method=staf)."""
+    mover_r = np.asarray(mover_radius, dtype=float).tolist()
+    movers = obs.movers[: len(mover_r)].tolist()
+    out = pref.copy()
+    if not movers:
+        return out
+    position, velocity = obs.position.tolist(), obs.velocity.tolist()
+    for i in range(len(pref)):
+        v_own = velocity[i][0], velocity[i][1]
+        lines = _mover_lines(movers, mover_r, position[i], v_own, radius, max_speed, horizon, dt, margin)
+        if not lines:
+            continue
+        # the robots it senses, the avoidance all its own (they may not be stepping aside): a robot that dodges a
+        # mover does not dodge into its neighbour
+        for j in np.flatnonzero(obs.neighbours[i]).tolist():
+            qx, qy = obs.rel_position[i, j].tolist()
+            ux, uy = obs.rel_velocity[i, j].tolist()
+            lines.append(_line((qx, qy), (-ux, -uy), 2 * radius + margin, horizon, dt, 1.0, v_own))
+        gap = float(obs.obstacle_distance[i]) - margin
+        n_fixed = 0
+        if gap < max_speed * horizon:
+            ax, ay = obs.obstacle[i].tolist()
+            scale = max(math.sqrt(ax * ax + ay * ay), _EPS)
+            nx, ny = ax / scale, ay / scale
+            g = max(gap, 0.0)
+            lines.insert(0, (nx * g / horizon, ny * g / horizon, -ny, nx))
+            n_fixed = 1
+        count, result = _lp2(lines, max_speed, (float(pref[i, 0]), float(pref[i, 1])), False)
         if count < len(lines):
             result = _lp3(lines, n_fixed, count, max_speed, result)
         out[i] = result

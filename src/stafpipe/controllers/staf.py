@@ -45,6 +45,10 @@ class StafMethodConfig:
     """low_level other than learned: the step's gain (1/s)."""
     stop_gap: float = 0.02
     """low_level other than learned: the gap (m) its approach cap brakes to (as `train_ppo.imitation.stop_gap`)."""
+    avoid_movers: bool = True
+    """Moving obstacles (a walking human) avoided by a safety layer on the commands, ORCA's half-planes of the movers
+    alone (controllers/orca.py `avoid_movers`): neither the plan nor the network sees a mover's velocity. Not in the
+    STAF paper, which has no moving obstacles; no effect on a map without them (docs/staf.md, "Moving obstacles")."""
     plan: PlanConfig = field(default_factory=PlanConfig)
     """Subteams, sequencing and regroup; keep the settings the policy was trained with (its `made_by` records them)."""
 

@@ -51,7 +51,10 @@ def resume_state(out_dir: Path, digest: str) -> Path | None:
     return None
 
 
-BUILT_IN_TEST_MAPS = {"corridor", "bridge", "doorway", "narrowing", "multi_passage", "bollards", "forest"}
+BUILT_IN_TEST_MAPS = {
+    *("corridor", "bridge", "doorway", "narrowing", "multi_passage", "bollards", "forest"),
+    *("corridor_walker", "crossing_walkers"),
+}
 """STAF's maps (conf/scenario/): what learned methods are tested on, never trained on (docs/decisions.md)."""
 
 
