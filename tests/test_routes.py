@@ -14,7 +14,7 @@ from stafpipe.controllers.lf import LFConfig, LFController
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.episode import run_episode
 from stafpipe.geometry import Geometry, PathFrame, point_ahead
-from stafpipe.metrics import MetricContext, Trajectory, route_done, success_rate, travel_time
+from stafpipe.metrics import MetricContext, RouteProgress, Trajectory, route_done, success_rate, travel_time
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
@@ -76,6 +76,7 @@ def test_a_point_keeps_its_place_on_a_route_that_comes_back_near_itself() -> Non
 
 
 @pytest.mark.slow
+@pytest.mark.slow
 def test_leader_follower_goes_round_a_route_that_ends_near_its_start() -> None:
     """Zhu et al.'s Scenario 1: before, the leader's path went straight to the goal 0.5 m away and the team "arrived"
     in under a second; now it follows the circle (about 37 s at 1.5 m/s, the bound 24.5 s)."""
@@ -97,3 +98,33 @@ def test_staf_plan_goes_round_a_route_that_ends_near_its_start() -> None:
     assert 30.0 < tracked < 60.0
     nearest, _, _ = ideal_run(sc, never, steps=700, plan_cfg=PlanConfig(track_progress=False))
     assert math.isinf(nearest)
+
+
+def test_route_progress_step_by_step_agrees_with_route_done() -> None:
+    """The arrival bonus's route check (`RouteProgress`, one step at a time) passes the route at the sample SR's
+    `route_done` finds, on random walks round a three-waypoint route."""
+    rng = np.random.default_rng(3)
+    route = [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0)]
+    for _ in range(20):
+        walk = np.cumsum(rng.normal(0.0, 0.4, (200, 3, 2)), axis=0) + rng.normal(0.0, 0.5, (1, 3, 2))
+        progress = RouteProgress([route])
+        first = next((t for t in range(len(walk)) if progress.update(walk[t : t + 1])[0]), len(walk))
+        assert first == route_done(walk, route)
+
+
+@pytest.mark.slow
+def test_the_arrival_bonus_waits_for_the_route() -> None:
+    """Zhu et al.'s loop, whose goal slots lie 0.5 m from the start: robots that step straight onto them get no
+    arrival bonus in the multi-agent environment (nor the trainer, the same `step_reward`), the team has not gone
+    round."""
+    from stafpipe.marl_env import BatchedTeamEnv
+
+    env = BatchedTeamEnv("zhu_moving_obstacle", worlds=1, method="dgnn", episode_steps=40)
+    env.reset(0)
+    for _ in range(40):
+        to_goal = env.adapter.goals() - env.worlds.pos
+        c, s = np.cos(env.worlds.heading), np.sin(env.worlds.heading)
+        local = np.stack([c * to_goal[..., 0] + s * to_goal[..., 1], -s * to_goal[..., 0] + c * to_goal[..., 1]], -1)
+        env.step(np.clip(2.0 * local / env.worlds.robot.max_speed, -1.0, 1.0))
+    assert (env.dist < 0.3).all()  # every robot on its goal slot
+    assert not env.reached.any()

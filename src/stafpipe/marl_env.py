@@ -20,7 +20,7 @@ import numpy as np
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.ppo import teams_of
-from stafpipe.learning.rollout import commands, episode_stats, step_reward
+from stafpipe.learning.rollout import commands, episode_stats, step_reward, world_routes
 from stafpipe.scenario import build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds
@@ -71,7 +71,8 @@ class BatchedTeamEnv:
         self.obs = self.worlds.reset([seed + w for w in range(self.size)])
         self.adapter.begin(teams_of(self.drawn, self.worlds))
         self.dist = np.linalg.norm(self.adapter.goals() - self.worlds.pos, axis=-1)
-        self.reached = self.dist <= self.tolerance
+        self.route = world_routes(self.worlds)
+        self.reached = (self.dist <= self.tolerance) & self.route.update(self.worlds.pos)[:, None]
         self.hits, self.t = 0, 0
         self.returns = np.zeros((self.size, self.n))
         return self._features()
@@ -91,7 +92,7 @@ class BatchedTeamEnv:
         )
         self.hits += sum(len(e) for e in events)
         reward, self.dist, self.reached = step_reward(
-            self.adapter, self.worlds, self.obs, aim, before, self.reached, self.tolerance, self.reward_cfg
+            self.adapter, self.worlds, self.obs, aim, before, self.reached, self.tolerance, self.reward_cfg, self.route
         )
         self.returns += reward
         self.t += 1

@@ -108,6 +108,28 @@ def route_done(positions: np.ndarray, route, reach: float = ROUTE_REACH) -> int:
     return k
 
 
+class RouteProgress:
+    """Each world's place on its route, step by step: `route_done` for a team that is still moving (the trainer's and
+    the multi-agent environment's arrival bonus waits for the route as SR does)."""
+
+    def __init__(self, routes: list, reach: float = ROUTE_REACH) -> None:
+        self.routes = [np.asarray(r, dtype=float).reshape(-1, 2) for r in routes]
+        self.lengths = np.array([len(r) for r in self.routes])
+        self.next = np.zeros(len(self.routes), dtype=int)
+        self.reach = reach
+
+    def update(self, pos: np.ndarray) -> np.ndarray:
+        """(B,) bool: world w's team (positions `pos`, (B, n, 2)) has passed every waypoint of its route, in order."""
+        for w in np.flatnonzero(self.next < self.lengths).tolist():
+            while self.next[w] < self.lengths[w]:
+                point = self.routes[w][self.next[w]]
+                near = min(np.linalg.norm(pos[w].mean(axis=0) - point), np.linalg.norm(pos[w] - point, axis=-1).min())
+                if near > self.reach:
+                    break
+                self.next[w] += 1
+        return self.next >= self.lengths
+
+
 def matched_goal_distance(pos: np.ndarray, goal: np.ndarray) -> np.ndarray:
     """Distance of each robot to the goal slot it is matched to (Hungarian, robots interchangeable)."""
     cost = cdist(pos, goal)

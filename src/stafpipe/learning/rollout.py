@@ -11,6 +11,7 @@ from stafpipe.learning.adapters import Adapter
 from stafpipe.learning.config import RewardConfig, TrainPPOConfig
 from stafpipe.learning.features import stack_xy
 from stafpipe.learning.policy_net import PolicyNet
+from stafpipe.metrics import RouteProgress
 from stafpipe.sensing import Observation
 from stafpipe.world import Worlds
 
@@ -46,6 +47,11 @@ def contact_penalties(worlds: Worlds, obs: Observation, rc: RewardConfig) -> np.
     return rc.robot_collision * robot_hits + rc.wall_contact * wall
 
 
+def world_routes(worlds: Worlds) -> RouteProgress:
+    """The routes (`reference_path`) of the worlds' scenarios, none passed yet."""
+    return RouteProgress([sc.spec.reference_path for sc in worlds.scenarios])
+
+
 def step_reward(
     adapter: Adapter,
     worlds: Worlds,
@@ -55,12 +61,16 @@ def step_reward(
     reached: np.ndarray,
     tolerance: float,
     rc: RewardConfig,
+    route: RouteProgress | None = None,
 ) -> tuple[np.ndarray, ...]:
     """(B, n) reward of the step just taken, each robot's distance to its goal slot and whether it has reached it:
     progress towards the adapter's aim (from `before`), the one-off arrival bonus, contacts and the method's own
-    terms. The trainer and the multi-agent environment (marl_env.py) both reward through this."""
+    terms. The trainer and the multi-agent environment (marl_env.py) both reward through this. With `route` (the
+    worlds' reference paths), a goal slot counts once the team has passed its route, as in SR (docs/metrics.md)."""
     new_dist = np.linalg.norm(adapter.goals() - worlds.pos, axis=-1)
     now_reached = new_dist <= tolerance
+    if route is not None:
+        now_reached &= route.update(worlds.pos)[:, None]
     progress = before - np.linalg.norm(aim - worlds.pos, axis=-1)
     reward = rc.progress * progress + rc.goal * (now_reached & ~reached) + contact_penalties(worlds, obs, rc)
     reward = reward + adapter.reward(worlds.pos, worlds.vel, obs)
@@ -102,7 +112,8 @@ def collect(
     dt = worlds.cfg.control_dt
     buf: dict[str, list] = {k: [] for k in ("own", "edge", "mask", "actions", "logprobs", "values", "rewards")}
     dist = np.linalg.norm(adapter.goals() - worlds.pos, axis=-1)
-    reached = dist <= tolerance
+    route = world_routes(worlds)
+    reached = (dist <= tolerance) & route.update(worlds.pos)[:, None]
     hits = 0
     for _ in range(tc.episode_steps):
         f, aim, _ = adapter.step(obs, dt)
@@ -115,7 +126,7 @@ def collect(
             logprob = dist_a.log_prob(action).sum(-1)
         obs, events = worlds.step(commands(action.numpy(), worlds.heading, worlds.robot.max_speed))
         hits += sum(len(e) for e in events)
-        reward, dist, reached = step_reward(adapter, worlds, obs, aim, before, reached, tolerance, rc)
+        reward, dist, reached = step_reward(adapter, worlds, obs, aim, before, reached, tolerance, rc, route)
         for key, v in (
             ("own", own),
             ("edge", edge),
