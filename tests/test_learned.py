@@ -440,3 +440,40 @@ def test_plot_table_draws_labelled_variants_side_by_side(workdir) -> None:
     assert (run / "levels.png").is_file()
     table = pd.read_csv(run / "table.csv")
     assert sorted(table.sr) == [0.5, 1.0]
+
+
+@pytest.mark.parametrize("drive", ["holonomic", "diff_drive"])
+def test_the_safety_layer_caps_the_approach_to_walls_and_robots(drive) -> None:
+    """`method.approach_cap`: the shipped STAF's line through the corridor, stepped with the capped commands. Wherever a
+    robot is within 0.35 m of the closest obstacle or of a robot it senses, it approaches it no faster than 2 x (gap -
+    0.02 m), while the same controller without the layer, given the same observations, asks for more at some step."""
+    base = load_named_scenario("corridor")
+    spec = dataclasses.replace(
+        base.spec,
+        team=dataclasses.replace(base.spec.team, formation="line"),
+        robot=dataclasses.replace(base.spec.robot, drive=drive),
+    )
+    sc = build_scenario(spec)
+    capped = make_controller(StafMethodConfig(approach_cap=True))
+    plain = make_controller(StafMethodConfig())
+    worlds = Worlds([sc], SensingConfig(position_noise=0.0))
+    obs = worlds.reset([1])
+    team = _team(sc, worlds)
+    capped.reset(team)
+    plain.reset(team)
+    near, exceeded = 0, 0
+    for _ in range(260):
+        one = obs.world(0)
+        command, asked = capped.act(one), plain.act(one)
+        towards = [(one.obstacle, one.obstacle_distance)]
+        gaps = np.linalg.norm(one.rel_position, axis=-1) - 2 * sc.spec.robot.radius
+        for j in range(sc.spec.team.n):
+            towards.append((one.rel_position[:, j], np.where(one.neighbours[:, j], gaps[:, j], np.inf)))
+        for vector, gap in towards:
+            unit = vector / np.maximum(np.linalg.norm(vector, axis=-1, keepdims=True), 1e-9)
+            close = gap < 0.35
+            near += int(close.sum())
+            assert ((command * unit).sum(-1)[close] <= AVOID_GAIN * (gap[close] - 0.02) + 1e-6).all()
+            exceeded += int(((asked * unit).sum(-1)[close] > AVOID_GAIN * (gap[close] - 0.02) + 1e-6).sum())
+        obs, _ = worlds.step(command[None])
+    assert near > 0 and exceeded > 0

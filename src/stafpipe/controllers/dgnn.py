@@ -35,15 +35,21 @@ class DGNNConfig:
     shipped DGNN's warm start, docs/learning.md)."""
     proportional_gain: float = 2.0
     """low_level other than learned: the step's gain (1/s)."""
+    approach_cap: bool = False
+    """The safety layer of `method=staf`'s `approach_cap` (approach speed capped near robots and obstacles); off, as
+    DGNN's paper acts (docs/staf.md, "A safety layer")."""
+    approach_cap_gap: float = 0.02
+    """approach_cap: the gap (m) it brakes to."""
     avoid_movers: bool = True
     """Moving obstacles avoided by the safety layer `method=staf` has (controllers/orca.py `avoid_movers`), so that
     the two learned methods are compared alike; no effect on a map without movers (docs/staf.md, "Moving
     obstacles")."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.learning.teachers import check_low_level
+        from stafpipe.learning.teachers import check_low_level, check_stop_gap
 
         check_low_level(self.low_level, self.proportional_gain, key)
+        check_stop_gap(self.approach_cap_gap, f"{key}.approach_cap_gap")
 
     def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
         """With the run's sensing: the policy's features clip what it senses at its own radius."""

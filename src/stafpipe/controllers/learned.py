@@ -13,14 +13,14 @@ from typing import Any
 import numpy as np
 import torch
 
-from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo
+from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo, forward_capped, limit_approach
 from stafpipe.controllers.orca import avoid_movers
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
 from stafpipe.learning.config import RewardConfig
 from stafpipe.learning.rollout import commands
-from stafpipe.learning.teachers import teacher_actions
+from stafpipe.learning.teachers import AVOID_DISTANCE, AVOID_GAIN, teacher_actions
 from stafpipe.sensing import Observation
 
 log = logging.getLogger(__name__)
@@ -190,9 +190,21 @@ class LearnedController(Controller):
                 for w in np.flatnonzero(active).tolist():
                     action[w] = self._world_mean(f, w).numpy()
         out = commands(action, obs.heading, self.command_speed)
+        if getattr(self.cfg, "approach_cap", False):
+            out = self._approach_capped(out, obs)
         out[~active] = 0.0
         if getattr(self.cfg, "avoid_movers", False):
             self._avoid_movers(out, obs, active)
+        return out
+
+    def _approach_capped(self, out: np.ndarray, obs: Observation) -> np.ndarray:
+        """`method.approach_cap`: the classical methods' approach cap on the commands of every world at once, and on a
+        differential drive's motion from them (docs/staf.md, "A safety layer")."""
+        robot = self.adapter.teams[0].scenario.spec.robot  # the worlds of a batch share one robot
+        gap = self.cfg.approach_cap_gap
+        out = limit_approach(out, obs, robot.radius, AVOID_DISTANCE, AVOID_GAIN, gap)
+        if robot.drive == "diff_drive":
+            out = forward_capped(out, obs, robot.radius, AVOID_DISTANCE, AVOID_GAIN, gap)
         return out
 
     def _avoid_movers(self, out: np.ndarray, obs: Observation, active: np.ndarray) -> None:

@@ -45,6 +45,13 @@ class StafMethodConfig:
     """low_level other than learned: the step's gain (1/s)."""
     stop_gap: float = 0.02
     """low_level other than learned: the gap (m) its approach cap brakes to (as `train_ppo.imitation.stop_gap`)."""
+    approach_cap: bool = False
+    """A safety layer on the commands, not in STAF's paper (whose action is psi's alone): towards any robot or obstacle
+    closer than 0.35 m the approach speed is capped at 2 x (gap - `approach_cap_gap`), and on a differential drive the
+    motion the drive makes from the command too (the classical methods' cap, controllers/base.py `limit_approach`,
+    `forward_capped`). Any low level, learned or hand-made, gets it alike (docs/staf.md, "A safety layer")."""
+    approach_cap_gap: float = 0.02
+    """approach_cap: the gap (m) it brakes to."""
     avoid_movers: bool = True
     """Moving obstacles (a walking human) avoided by a safety layer on the commands, ORCA's half-planes of the movers
     alone (controllers/orca.py `avoid_movers`): neither the plan nor the network sees a mover's velocity. Not in the
@@ -53,9 +60,10 @@ class StafMethodConfig:
     """Subteams, sequencing and regroup; keep the settings the policy was trained with (its `made_by` records them)."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.learning.teachers import check_low_level
+        from stafpipe.learning.teachers import check_low_level, check_stop_gap
 
         check_low_level(self.low_level, self.proportional_gain, key, self.stop_gap)
+        check_stop_gap(self.approach_cap_gap, f"{key}.approach_cap_gap")
         self.plan.check(f"{key}.plan")
 
     def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
