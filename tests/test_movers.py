@@ -80,3 +80,21 @@ def test_staf_keeps_clear_of_a_walker_that_crosses_its_way() -> None:
         if avoid:
             assert all(r["sr"] == 1.0 for r in runs)
     assert contacts[True] == 0 and contacts[False] > 0
+
+
+@pytest.mark.slow
+def test_leader_follower_on_a_differential_drive_keeps_clear_of_a_walker() -> None:
+    """L&F's differential-drive local planner (the approach cap, `forward`) saw a walker as a wall point without its
+    velocity and was hit; the walkers are now avoided first (`orca.avoid_movers`), as ORCA avoids them for holonomic
+    robots."""
+    from stafpipe.controllers.lf import LFConfig, LFController
+    from stafpipe.scenario import RobotSpec
+
+    spec = _crossing()
+    spec.robot = RobotSpec(drive="diff_drive")
+    sc = build_scenario(spec)
+    runs = [
+        run_episode(sc, Geometry.of(sc), LFController(LFConfig()), "lf", seed, WorldConfig(), SensingConfig(), 0.3, 0.1)
+        for seed in range(3)
+    ]
+    assert sum(r["collisions"] for r in runs) == 0 and all(r["sr"] == 1.0 for r in runs)

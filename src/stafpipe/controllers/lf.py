@@ -22,7 +22,7 @@ from typing import cast
 import numpy as np
 
 from stafpipe.controllers.base import Controller, TeamInfo, forward_capped, limit_approach
-from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY, orca_velocities
+from stafpipe.controllers.orca import ORCA_HORIZON, ORCA_MARGIN, ORCA_RECOVERY, avoid_movers, orca_velocities
 from stafpipe.errors import require
 from stafpipe.formations import rotation
 from stafpipe.geometry import Geometry, path_parts, point_ahead
@@ -118,7 +118,8 @@ class LFController(Controller):
             return out
         copies = [cast(LFController, self._worlds[w]) for w in worlds.tolist()]
         radii = {c.radius for c in copies}
-        if len(radii) > 1 or any(c.orca for c in copies):  # other sizes in one batch, or ORCA: world by world
+        movers = {tuple(c.mover_radius.tolist()) for c in copies}
+        if len(radii) > 1 or len(movers) > 1 or any(c.orca for c in copies):  # unlike worlds, or ORCA: one by one
             return super().act_worlds(obs, active)
         v = np.stack([c._command(obs.world(w)) for c, w in zip(copies, worlds.tolist(), strict=True)])
         batch = Observation(*(x[worlds] for x in obs))
@@ -127,8 +128,16 @@ class LFController(Controller):
 
     def _capped(self, v: np.ndarray, obs: Observation) -> np.ndarray:
         """The approach cap on the control law's velocities (`limit_approach`) and, with `forward` (and `auto`) on a
-        differential drive, on the motion the drive makes from them (`forward_capped`)."""
+        differential drive, on the motion the drive makes from them (`forward_capped`), the moving obstacles avoided
+        first (`orca.avoid_movers`)."""
         cfg = self.cfg
+        if len(self.mover_radius):  # walkers, as ORCA avoids them for holonomic robots (the batch shares one map)
+            v = np.stack(
+                [
+                    avoid_movers(v[b], obs.world(b), self.radius, self.max_speed, self.mover_radius)
+                    for b in range(len(v))
+                ]
+            )
         v = limit_approach(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)
         if self.forward:
             v = forward_capped(v, obs, self.radius, cfg.avoid_distance, cfg.avoid_gain)
