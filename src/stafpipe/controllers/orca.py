@@ -231,7 +231,8 @@ def avoid_movers(
     """`pref` (n, 2) with only the moving obstacles avoided, ORCA's way: a robot that no mover can reach within the
     horizon keeps its velocity to the bit; one that a mover can reach takes the velocity nearest its own that avoids
     the mover and approaches the nearest static obstacle point no faster than ORCA allows (so that stepping aside
-    does not push it into a wall). A safety layer for methods that do not see a mover's velocity (method=staf)."""
+    does not push it into a wall). A safety layer for controllers that do not see a mover's velocity (the learned
+    methods' networks, L&F's approach cap on a differential drive)."""
     mover_r = np.asarray(mover_radius, dtype=float).tolist()
     movers = obs.movers[: len(mover_r)].tolist()
     out = pref.copy()
