@@ -176,13 +176,9 @@ def orca_velocities(
     for i in range(n):
         lines: list[Line] = []
         v_own = velocity[i][0], velocity[i][1]
-        gap = obstacle_distance[i] - margin
-        if gap < max_speed * horizon:  # the nearest obstacle point: approach it no faster than closes the gap in time
-            ax, ay = obstacle[i]
-            scale = max(math.sqrt(ax * ax + ay * ay), _EPS)
-            nx, ny = ax / scale, ay / scale
-            g = max(gap, 0.0)
-            lines.append((nx * g / horizon, ny * g / horizon, -ny, nx))
+        wall = _wall_line(obstacle[i], obstacle_distance[i], margin, max_speed, horizon)
+        if wall is not None:
+            lines.append(wall)
         n_fixed = len(lines)
         for k in range(bounds[i], bounds[i + 1]):
             (qx, qy), (ux, uy) = pair_p[k], pair_v[k]
@@ -194,6 +190,19 @@ def orca_velocities(
             result = _lp3(lines, n_fixed, count, max_speed, result)
         out[i] = result
     return out
+
+
+def _wall_line(obstacle: list[float], distance: float, margin: float, max_speed: float, horizon: float) -> Line | None:
+    """The half-plane of the nearest obstacle point (vector `obstacle` from the robot, surface gap `distance`):
+    approach it no faster than closes the gap in `horizon`; None where it is too far to matter."""
+    gap = distance - margin
+    if gap >= max_speed * horizon:
+        return None
+    ax, ay = obstacle
+    scale = max(math.sqrt(ax * ax + ay * ay), _EPS)
+    nx, ny = ax / scale, ay / scale
+    g = max(gap, 0.0)
+    return nx * g / horizon, ny * g / horizon, -ny, nx
 
 
 def _mover_lines(
@@ -250,14 +259,10 @@ def avoid_movers(
             qx, qy = obs.rel_position[i, j].tolist()
             ux, uy = obs.rel_velocity[i, j].tolist()
             lines.append(_line((qx, qy), (-ux, -uy), 2 * radius + margin, horizon, dt, 1.0, v_own))
-        gap = float(obs.obstacle_distance[i]) - margin
+        wall = _wall_line(obs.obstacle[i].tolist(), float(obs.obstacle_distance[i]), margin, max_speed, horizon)
         n_fixed = 0
-        if gap < max_speed * horizon:
-            ax, ay = obs.obstacle[i].tolist()
-            scale = max(math.sqrt(ax * ax + ay * ay), _EPS)
-            nx, ny = ax / scale, ay / scale
-            g = max(gap, 0.0)
-            lines.insert(0, (nx * g / horizon, ny * g / horizon, -ny, nx))
+        if wall is not None:
+            lines.insert(0, wall)
             n_fixed = 1
         count, result = _lp2(lines, max_speed, (float(pref[i, 0]), float(pref[i, 1])), False)
         if count < len(lines):
