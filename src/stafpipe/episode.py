@@ -18,7 +18,7 @@ from stafpipe.controllers.plan_geometry import extent, lateral_clearance
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
 from stafpipe.faults import ROBOT_FAULTS
 from stafpipe.geometry import Geometry, PathFrame, capsule_arrays, closest_points, path_length
-from stafpipe.metrics import MetricContext, Trajectory, episode_metrics, matched_goal_distance, route_done
+from stafpipe.metrics import MetricContext, RouteProgress, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds
@@ -204,14 +204,6 @@ class _Recorder:
         )
 
 
-def _passed(pos: np.ndarray, route: np.ndarray) -> int:
-    """How many of `route`'s next waypoints robots at `pos` (n, 2) pass where they stand (`metrics.route_done`)."""
-    k = 0
-    while k < len(route) and route_done(pos[None], route[k : k + 1]) == 0:
-        k += 1
-    return k
-
-
 def run_episodes(
     scenario: Scenario,
     geometry: Geometry,
@@ -245,20 +237,20 @@ def run_episodes(
             rec.log.info(method, seed, text, asdict(ctx), worlds.goal[w])
         rec.record(worlds, w, controller.world_view(w), 0)
     active = np.ones(len(seeds), dtype=bool)
-    route = np.array(ctx.route, dtype=float).reshape(-1, 2)
-    # reference waypoints each world's team has passed, from its start on (as metrics.route_done counts them)
-    passed = np.array([_passed(worlds.pos[w], route) for w in range(len(seeds))], dtype=int)
+    # the reference waypoints each world's team has passed, from its start on (as metrics.route_done counts them)
+    route = RouteProgress([ctx.route] * len(seeds))
+    route.update(worlds.pos)
     steps = int(round(scenario.spec.time_limit / world_cfg.control_dt))
     for step in range(1, steps + 1):
         actions = controller.act_worlds(obs, active)
         obs, events = worlds.step(actions)
+        passed = route.update(worlds.pos)
         for w in np.flatnonzero(active).tolist():
             rec = recorders[w]
             rec.record(worlds, w, controller.world_view(w), step)
             for c in events[w]:
                 rec.collided(step, c.a, c.b)
-            passed[w] += _passed(worlds.pos[w], route[passed[w] :])
-            if passed[w] == len(route) and matched_goal_distance(worlds.pos[w], worlds.goal[w]).max() <= goal_tolerance:
+            if passed[w] and matched_goal_distance(worlds.pos[w], worlds.goal[w]).max() <= goal_tolerance:
                 active[w] = False
         if not active.any():
             break

@@ -92,16 +92,20 @@ ROUTE_REACH = 1.0
 (`route_done`; chosen, not tuned: a robot's spacing in the paper's formations). docs/metrics.md."""
 
 
+def waypoint_gap(positions: np.ndarray, waypoint: np.ndarray) -> np.ndarray:
+    """(..,) distance from a waypoint to the team at `positions` (.., n, 2): to its centroid or its nearest robot,
+    whichever is closer (how `route_done` passes a waypoint)."""
+    centroid = np.linalg.norm(positions.mean(axis=-2) - waypoint, axis=-1)
+    return np.minimum(centroid, np.linalg.norm(positions - waypoint, axis=-1).min(-1))
+
+
 def route_done(positions: np.ndarray, route, reach: float = ROUTE_REACH) -> int:
     """Index of the first sample (of `positions`, (T, n, 2)) by which the team has passed every waypoint of `route`,
     in order: 0 without a route, T if it never does. A route that comes back near its start (Zhu et al. 2019,
     Scenario 1) would otherwise count a team that never left as arrived."""
     k = 0
     for waypoint in route:
-        w = np.asarray(waypoint, float)
-        rest = positions[k:]
-        near = np.minimum(np.linalg.norm(rest.mean(axis=1) - w, axis=-1), np.linalg.norm(rest - w, axis=-1).min(axis=1))
-        hits = np.flatnonzero(near <= reach)
+        hits = np.flatnonzero(waypoint_gap(positions[k:], np.asarray(waypoint, float)) <= reach)
         if not len(hits):
             return len(positions)
         k += int(hits[0])
@@ -122,9 +126,7 @@ class RouteProgress:
         """(B,) bool: world w's team (positions `pos`, (B, n, 2)) has passed every waypoint of its route, in order."""
         for w in np.flatnonzero(self.next < self.lengths).tolist():
             while self.next[w] < self.lengths[w]:
-                point = self.routes[w][self.next[w]]
-                near = min(np.linalg.norm(pos[w].mean(axis=0) - point), np.linalg.norm(pos[w] - point, axis=-1).min())
-                if near > self.reach:
+                if waypoint_gap(pos[w], self.routes[w][self.next[w]]) > self.reach:
                     break
                 self.next[w] += 1
         return self.next >= self.lengths
