@@ -167,3 +167,28 @@ def test_episodes_differ_by_default() -> None:
     assert np.abs(starts[0].pos - starts[1].pos).max() > 0.1  # centimetres, not millimetres
     seen = [run.position[0] for run in runs]
     assert np.abs(seen[0] - seen[1]).max() > 0.02 and np.abs(seen[1] - seen[2]).max() > 0.02
+
+
+def test_a_start_kick_moves_each_robot_once_by_at_most_its_size() -> None:
+    """`world.start_kick`: the first step carries each robot up to that far (not all the same way), the second step
+    with a zero command moves nothing, the same seed kicks the same way, and the default kicks nobody."""
+    kicked = Worlds([corridor()] * 2, cfg=WorldConfig(start_kick=0.3))
+    kicked.reset([4, 5])
+    start = kicked.pos.copy()
+    kicked.step(np.zeros((2, 10, 2)))
+    moved = kicked.pos - start
+    dist = np.linalg.norm(moved, axis=-1)
+    assert 0.05 < dist.max() <= 0.3 + 1e-6 and dist.min() >= 0.0
+    assert np.abs(moved[0] - moved[0].mean(axis=0)).max() > 0.05  # each robot its own way
+    after = kicked.pos.copy()
+    kicked.step(np.zeros((2, 10, 2)))
+    assert np.abs(kicked.pos - after).max() < 1e-9 and np.abs(kicked.vel).max() == 0.0
+    again = Worlds([corridor()] * 2, cfg=WorldConfig(start_kick=0.3))
+    again.reset([4, 5])
+    again.step(np.zeros((2, 10, 2)))
+    assert np.array_equal(again.pos, after)
+    plain = Worlds([corridor()] * 2)
+    plain.reset([4, 5])
+    assert np.array_equal(plain.pos, start)  # the kick draws from its own stream: the starts are the same
+    plain.step(np.zeros((2, 10, 2)))
+    assert np.abs(plain.pos - start).max() < 1e-9

@@ -47,6 +47,10 @@ class WorldConfig:
     start_noise: float = 0.12
     """Standard deviation (m) of the seeded perturbation of each robot's start position, clipped at 2 sigma; a robot
     whose perturbed start would touch an obstacle or another robot starts on its slot (docs/decisions.md)."""
+    start_kick: float = 0.0
+    """A disturbance for training (m): in an episode's first step each robot is carried, on top of its command, by up
+    to this far in a random direction (its own seeded stream; contacts apply), and keeps only its commanded velocity
+    afterwards. 0: none. The simulator did this by accident until 2026-12-06 (docs/staf.md, "Eight seeds")."""
     heading_spread_deg: float = 0.0
     """Each episode turns the start formation about its centre by an angle drawn uniformly from +-this (degrees); a
     draw that puts a robot on an obstacle is redrawn (10 tries, then no turn). Goals stay where the scenario has
@@ -62,6 +66,7 @@ class WorldConfig:
         require(self.substeps >= 1, f"{key}.substeps", "must be >= 1", self.substeps)
         require(self.collision_slop >= 0, f"{key}.collision_slop", "must be >= 0", self.collision_slop)
         require(self.start_noise >= 0, f"{key}.start_noise", "must be >= 0", self.start_noise)
+        require(self.start_kick >= 0, f"{key}.start_kick", "must be >= 0", self.start_kick)
         spread = self.heading_spread_deg
         require(0 <= spread <= 180, f"{key}.heading_spread_deg", "must be in [0, 180]", spread)
         for k, fault in enumerate(self.faults):
@@ -266,6 +271,8 @@ class Worlds:
         self.time = np.zeros(b)
         self.collided = np.zeros((b, self.n), dtype=bool)
         self.rngs = [np.random.default_rng(0) for _ in scenarios]
+        self._kick: np.ndarray | None = None
+        """Each robot's extra velocity in the next step (`start_kick`), set by reset and spent by step."""
         self.fault_rngs = [np.random.default_rng(0) for _ in scenarios]
         """Lost messages are drawn from their own streams: a drop fault leaves the sensing noise as it was."""
         self._mover_state: list[list[tuple[np.ndarray, int]]] = [[] for _ in scenarios]
@@ -305,7 +312,18 @@ class Worlds:
             self._mover_state[w] = [(np.array(m.waypoints, dtype=float), 1 % len(m.waypoints)) for m in movers]
         self._update_movers()
         self.fault_events = transitions(self.faults, -1.0, 0.0)
+        self._kick = self._draw_kick(seeds) if self.cfg.start_kick > 0 else None
         return self.observe()
+
+    def _draw_kick(self, seeds: list[int]) -> np.ndarray:
+        """(B, n, 2) velocities that carry each robot up to `start_kick` m in one control period, uniform in direction
+        and in distance, from each episode's own stream (so a kick of 0 leaves every other draw as it was)."""
+        kick = np.zeros((len(seeds), self.n, 2))
+        for w, seed in enumerate(seeds):
+            rng = np.random.default_rng([seed, 3])
+            angle, dist = rng.uniform(0, 2 * math.pi, self.n), rng.uniform(0, self.cfg.start_kick, self.n)
+            kick[w] = np.stack([np.cos(angle), np.sin(angle)], axis=1) * (dist / self.cfg.control_dt)[:, None]
+        return kick
 
     def _turned_start(self, sc: Scenario, start: np.ndarray, seed: int) -> tuple[np.ndarray, float]:
         """The start slots turned about their centre by the episode's draw from +-`heading_spread_deg` (its own random
@@ -354,8 +372,9 @@ class Worlds:
         self.vel, self.heading = self.drive(actions, self.vel, self.heading, self.robot, dt)
         events: list[list[Collision]] = []
         n, substeps = self.n, self.cfg.substeps
+        kick, self._kick = self._kick, None
         for w, sp in enumerate(self.spaces):
-            sp.io.velocity_rows[:n] = self.vel[w]
+            sp.io.velocity_rows[:n] = self.vel[w] if kick is None else self.vel[w] + kick[w]
         for w in self._has_movers:
             sp = self.spaces[w]
             for k, body in enumerate(sp.movers):
@@ -370,7 +389,10 @@ class Worlds:
                         self.collided[w, e.b] = True
                 sp.events = []
         state = np.stack([sp.io.state[:n] for sp in self.spaces])
+        commanded = self.vel
         self.pos, self.vel = state[..., :2].copy(), state[..., 2:].copy()
+        if kick is not None:  # the kick moves the robots once; their velocity stays the commanded one
+            self.vel = commanded
         self.time += dt
         if self.faults:
             self.fault_events = transitions(self.faults, float(self.time[0]) - dt, float(self.time[0]))
