@@ -45,15 +45,15 @@ def main() -> None:
     )
     print("-" * 112)
     measure(4, 10, device)  # unprinted: the first update on a GPU pays for CUDA's start (234 us a sample at 4 worlds)
-    rates = []
+    flops, rates = update_flops_per_sample(TrainPPOConfig()), []
     for b in (4, 16, 64):
         samples, rollout, upd, ref = measure(b, args.steps, device)
-        rates.append((b, update_flops_per_sample(TrainPPOConfig()) * samples / upd))
+        rates.append((b, flops * samples / upd))
         print(
             f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {1e6 * ref / samples:>23.1f} | "
             f"{upd / ref:>5.2f} | {samples / (rollout + upd):>21,.0f}"
         )
-    print(f"\nthe update's network arithmetic: {update_flops_per_sample(TrainPPOConfig()) / 1e6:.2f} MFLOP a sample")
+    print(f"\nthe update's network arithmetic: {flops / 1e6:.2f} MFLOP a sample")
     for b, rate in rates:
         print(f"{b:>6} worlds: the update computes at {rate / 1e9:.0f} GFLOP/s")
     print(f"a 2048 x 2048 matrix product on {device}: {matmul_rate(device) / 1e9:.0f} GFLOP/s")

@@ -178,7 +178,7 @@ def test_a_start_kick_moves_each_robot_once_by_at_most_its_size() -> None:
     kicked.step(np.zeros((2, 10, 2)))
     moved = kicked.pos - start
     dist = np.linalg.norm(moved, axis=-1)
-    assert 0.05 < dist.max() <= 0.3 + 1e-6 and dist.min() >= 0.0
+    assert 0.05 < dist.max() <= 0.3 + 1e-6
     assert np.abs(moved[0] - moved[0].mean(axis=0)).max() > 0.05  # each robot its own way
     after = kicked.pos.copy()
     kicked.step(np.zeros((2, 10, 2)))
