@@ -113,8 +113,8 @@ def test_staf_train_is_the_recipe_of_both_shipped_staf_runs(tmp_path) -> None:
     """`stafpipe run staf_train`'s two train steps compose to the configs recorded beside `staf.pt` and
     `staf_seed1.pt`: the same seed, training, sensing, world and robot settings, and the same map steps (named by step;
     their directories' hashes change with any new config key). A plan setting added since is compared as the
-    controller compares a checkpoint's record: only the keys the record has. A recipe edited without retraining fails
-    here."""
+    controller compares a checkpoint's record: only the keys the record has; a world setting added since must be at
+    its default (`world.start_kick`: 0). A recipe edited without retraining fails here."""
     import re
 
     import yaml
@@ -122,6 +122,7 @@ def test_staf_train_is_the_recipe_of_both_shipped_staf_runs(tmp_path) -> None:
 
     from stafpipe.paths import package_dir
     from stafpipe.pipeline import find_pipeline, load_pipeline, plan_pipeline
+    from stafpipe.world import WorldConfig
 
     steps = {s.name: cfg for s, _, _, _, cfg in plan_pipeline(load_pipeline(find_pipeline("staf_train")), tmp_path, [])}
 
@@ -134,5 +135,8 @@ def test_staf_train_is_the_recipe_of_both_shipped_staf_runs(tmp_path) -> None:
         recorded = read((package_dir() / "checkpoints" / f"{shipped}.yaml").read_text())
         assert ours["train_ppo"]["scenarios"] == recorded["train_ppo"]["scenarios"]  # the step names, not hashes
         ours["train_ppo"]["plan"] = {k: ours["train_ppo"]["plan"][k] for k in recorded["train_ppo"]["plan"]}
+        added = {k: v for k, v in ours["world"].items() if k not in recorded["world"]}  # world keys added since
+        assert added == {k: getattr(WorldConfig(), k) for k in added}, (shipped, added)  # at their defaults (off)
+        ours["world"] = {k: v for k, v in ours["world"].items() if k in recorded["world"]}
         for key in ("seed", "train_ppo", "sensing", "world", "robot"):
             assert ours[key] == recorded[key], (shipped, key)
