@@ -6,9 +6,9 @@ nothing else (what any trainer of this network must pay; the PPO update's excess
 Usage: python benchmarks/ppo_throughput.py [--steps 100]
 Prints one row per number of batched worlds (B = 4, 16, 64) and the device (CPU, 2 threads), then the rate at which
 the update does the network's arithmetic (floating-point operations counted by torch's FlopCounterMode on the
-forward and backward passes, Adam's few per weight left out) beside two references on the same device: a 2048 x 2048
-matrix product (about what the machine computes at all) and a stack of 64-wide linear layers, forward and backward
-(the width of the network's layers, without its gathers, sums and activations).
+forward and backward passes over each row's own rollout, Adam's few per weight left out) beside two references on
+the same device: a 2048 x 2048 matrix product (about what the machine computes at all) and a stack of 64-wide linear
+layers, forward and backward (the width of the network's layers, without its gathers, sums and activations).
 """
 
 from __future__ import annotations
@@ -45,17 +45,17 @@ def main() -> None:
     )
     print("-" * 112)
     measure(4, 10, device)  # unprinted: the first update on a GPU pays for CUDA's start (234 us a sample at 4 worlds)
-    flops, rates = update_flops_per_sample(TrainPPOConfig()), []
+    rates = []
     for b in (4, 16, 64):
-        samples, rollout, upd, ref = measure(b, args.steps, device)
-        rates.append((b, flops * samples / upd))
+        samples, rollout, upd, ref, flops = measure(b, args.steps, device)
+        rates.append((b, flops, flops * samples / upd))
         print(
             f"{b:>6} | {samples / rollout:>21,.0f} | {1e6 * upd / samples:>18.1f} | {1e6 * ref / samples:>23.1f} | "
             f"{upd / ref:>5.2f} | {samples / (rollout + upd):>21,.0f}"
         )
-    print(f"\nthe update's network arithmetic: {flops / 1e6:.2f} MFLOP a sample")
-    for b, rate in rates:
-        print(f"{b:>6} worlds: the update computes at {rate / 1e9:.0f} GFLOP/s")
+    print()
+    for b, flops, rate in rates:
+        print(f"{b:>6} worlds: {flops / 1e6:.2f} MFLOP a sample; the update computes at {rate / 1e9:.0f} GFLOP/s")
     print(f"a 2048 x 2048 matrix product on {device}: {matmul_rate(device) / 1e9:.0f} GFLOP/s")
     print(
         f"eight 64-wide linear layers, forward and backward, 16,000 rows, on {device}: "
@@ -63,8 +63,9 @@ def main() -> None:
     )
 
 
-def measure(b: int, steps: int, device: torch.device) -> tuple[int, float, float, float]:
-    """(robot-steps, rollout s, PPO update s, plain-torch update s) of one iteration of b corridor worlds."""
+def measure(b: int, steps: int, device: torch.device) -> tuple[int, float, float, float, float]:
+    """(robot-steps, rollout s, PPO update s, plain-torch update s, update FLOP a sample) of one iteration of b
+    corridor worlds."""
     corridor = load_named_scenario("corridor")
     path, eta = path_and_width(corridor)
     tc = TrainPPOConfig(worlds=b, episode_steps=steps)
@@ -81,49 +82,45 @@ def measure(b: int, steps: int, device: torch.device) -> tuple[int, float, float
     start = time.perf_counter()
     update(policy, opt, ro, adv, ret, tc, torch.Generator().manual_seed(0), device)
     upd = time.perf_counter() - start
-    return ro.rewards.numel(), rollout, upd, plain_update(policy, ro, tc, device)
+    return ro.rewards.numel(), rollout, upd, plain_update(policy, ro, tc, device), update_flops(policy, ro, tc)
 
 
-def update_flops_per_sample(tc: TrainPPOConfig) -> float:
-    """Floating-point operations of the update per robot-sample: one forward and backward pass of a minibatch of
-    corridor-like world-steps (10 robots, a third of the pairs within the radius, as in the corridor rollouts; the
-    CPU's neighbour-list messages), times the epochs."""
-    policy = DGNNPolicy(PolicyConfig())
-    gen = torch.Generator().manual_seed(0)
-    steps, n = 400, 10
-    own, edge = torch.randn(steps, n, 7, generator=gen), torch.randn(steps, n, n, 5, generator=gen)
-    mask = torch.rand(steps, n, n, generator=gen) < 1 / 3
+def update_flops(policy: DGNNPolicy, ro, tc: TrainPPOConfig) -> float:
+    """Floating-point operations of the update per robot-sample, counted on this rollout's own samples: one forward
+    and backward pass over them all (on the CPU: the messages of the pairs within the radius alone), times the
+    epochs."""
+    t, b = ro.rewards.shape[:2]
+    own, edge, mask = (x.reshape(t * b, *x.shape[2:]) for x in (ro.own, ro.edge, ro.mask))
     with FlopCounterMode(display=False) as counter:
         mean, value = policy(own, edge, mask)
         (mean.square().mean() + value.square().mean()).backward()
-    return tc.epochs * counter.get_total_flops() / (steps * n)
+    policy.zero_grad()
+    return tc.epochs * counter.get_total_flops() / ro.rewards.numel()
+
+
+def best_seconds(run, device: torch.device, tries: int) -> float:
+    """The shortest of `tries` timed calls of `run` (waiting for a GPU to finish each)."""
+    best = float("inf")
+    for _ in range(tries):
+        start = time.perf_counter()
+        run()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        best = min(best, time.perf_counter() - start)
+    return best
 
 
 def matmul_rate(device: torch.device) -> float:
     """FLOP/s of a 2048 x 2048 float32 matrix product, the best of five."""
     a = torch.randn(2048, 2048, device=device)
-    best = float("inf")
-    for _ in range(5):
-        start = time.perf_counter()
-        a @ a
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        best = min(best, time.perf_counter() - start)
-    return 2 * 2048**3 / best
+    return 2 * 2048**3 / best_seconds(lambda: a @ a, device, 5)
 
 
 def layers_rate(device: torch.device) -> float:
     """FLOP/s of forward and backward through eight 64 -> 64 linear layers on 16,000 rows, the best of ten."""
     layers = torch.nn.Sequential(*(torch.nn.Linear(64, 64) for _ in range(8))).to(device)
     x = torch.randn(16_000, 64, device=device)
-    best = float("inf")
-    for _ in range(10):
-        start = time.perf_counter()
-        layers(x).sum().backward()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        best = min(best, time.perf_counter() - start)
-    return 3 * 2 * 16_000 * 64 * 64 * 8 / best
+    return 3 * 2 * 16_000 * 64 * 64 * 8 / best_seconds(lambda: layers(x).sum().backward(), device, 10)
 
 
 def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig, device: torch.device) -> float:
