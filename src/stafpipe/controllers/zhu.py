@@ -379,12 +379,15 @@ class ZhuController(Controller):
             zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True)
         )
         room = self._clear_of_other_teams(p) if len(ids) > 1 else {}
+        # ours: at the goal every team heads for the goal slots one assignment of all robots gives its members, so
+        # that robots of two teams do not cross for each other's slots (home_slots)
+        home = self.goal[assign_slots(p, self.goal)] if at_end and self.cfg.home_slots else self.goal
         for k, members in self.teams.items():
             ref, heading = self.team_reference(members, p)
             region = intersect_all([[self.common[k], room[k]]])[0] if k in room else self.common[k]
             slots: np.ndarray | None
-            if at_end and len(members) == self.n:  # the whole team is back: take the goal formation (its own slots)
-                slots = self.goal
+            if at_end and (len(members) == self.n or (self.cfg.home_slots and not self._blind(members, p))):
+                slots = home[members]  # the goal formation; a team left behind out of sight of it follows the path
             else:
                 slots = self._fit(k, region, len(members), ref, heading)
             if slots is None:  # no formation fits: each robot on its own, as [20] breaks the formation; each heads

@@ -83,6 +83,12 @@ class ZhuConfig:
     """Delta p_min (m): least progress towards its slot over n_dead steps (Section IV-D)."""
     stuck_near: float = 0.4
     """Steps taken within this distance (m) of the slot do not count for stuck detection (the robot is there)."""
+    home_slots: bool = True
+    """Ours: once p_r has reached the goal, every team that is not left behind out of its sight (`team_reference`),
+    not only the whole team merged again, heads for the goal slots one assignment of all robots gives its members;
+    false: a subteam fits its own formation round the goal, as until 2026-12-06 (teams that never merged again, a
+    permanent fault or 20 robots too many to merge in their regions, stood there on no goal slot: docs/zhu.md,
+    "Teams apart at the goal")."""
     stall_time: float = 3.0
     """Ours (`zhu_decisions.TeamStall`): a team that stays over max_lag from p_r and moves less than dp_min in
     this many seconds splits in two; 0: off, as until 2026-12-06. 3 s: the n_dead steps of a stuck robot."""
