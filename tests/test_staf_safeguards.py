@@ -113,6 +113,12 @@ def test_follow_order_swaps_only_robots_standing_the_other_way_round() -> None:
     # past the stretch's end (1.5) robot 0 keeps its place; robot 3 passes robot 2, which has not come to it
     assert follow_order(rank, np.array([2.0, 3.0, 0.0, -1.0]), 0.2, until=1.5).tolist() == [0, 1, 2, 3]
     assert follow_order(rank, np.array([2.0, 3.0, 0.0, 1.0]), 0.2, until=1.5).tolist() == [0, 1, 3, 2]
+    # `plan.reorder_lateral`: a row level along the path, the robot placed first 1.5 m out to the side and the last
+    # on the path: the distance across counts as distance behind, so the one on the path leads
+    level, side = np.array([4.0, 4.0, 4.0]), np.array([1.5, -0.8, 0.05])
+    assert follow_order(rank[:3], level, 0.5).tolist() == [0, 1, 2]
+    assert follow_order(rank[:3], level, 0.5, lateral=side).tolist() == [2, 1, 0]
+    assert follow_order(rank[:3], level, 0.5, lateral=np.array([0.4, -0.2, 0.0])).tolist() == [0, 1, 2]  # margin
     # from a wedge's slots: the tip first, then left to right
     assert column_rank(np.array([[0.0, 0.0], [-1.0, 1.0], [-1.0, -1.0]])).tolist() == [0, 1, 2]
     # a line abreast (left at +y): left to right, or (`plan.inside_out`) the middle first, then outwards, left first

@@ -37,6 +37,7 @@ PLAN_SAFEGUARDS = (
     "in_sight",
     "sight_wait",
     "reorder",
+    "reorder_lateral",
     "in_world",
     "separate_in_world",
     "lead_past_end",

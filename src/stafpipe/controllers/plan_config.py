@@ -94,6 +94,12 @@ class PlanConfig:
     fixed at the split from the formation's slots, as trained. On a 1 m doorway the fixed order left a robot waiting
     on its column place in the door mouth while the one meant to go before it stood behind it against the wall, for
     ever (docs/staf.md)."""
+    reorder_lateral: bool = True
+    """With `reorder`: while robots come in to a column, a robot's distance from the path counts as that much further
+    behind, so that a robot out to the side of the column's line gives its place to one nearer the line instead of
+    cutting across its way, from the moment the subteam starts to turn into a column (its slots follow once it is
+    one); false: the order along the path alone, once it is a column, as trained (docs/staf.md, "The column's order
+    across the path")."""
     sight_wait: float = 1.0
     """Seconds a robot's way to its target must have crossed an obstacle before it aims at the path instead
     (`in_sight`): a robot sliding round a bollard sees its target again within a second, one pressed against a wall

@@ -160,19 +160,23 @@ def column_weight(file_weights: np.ndarray, anchor: float, half: float, ds: floa
     return float(np.maximum.reduce(window)) if len(window) else 0.0
 
 
-def follow_order(rank: np.ndarray, progress: np.ndarray, margin: float, until: float = np.inf) -> np.ndarray:
+def follow_order(
+    rank: np.ndarray, progress: np.ndarray, margin: float, until: float = np.inf, lateral: np.ndarray | None = None
+) -> np.ndarray:
     """`rank` (k,) with each pair of neighbours in the column swapped while the one placed behind stands more than
     `margin` ahead of the other along the path (`progress` (k,)) and the other has not yet come to `until` (the end
     of the single-file stretch: robots leaving it spread back into their formation and keep their order): the
     column's order becomes the robots' own, so that no robot has to pass another in single file (`plan.reorder`).
-    A copy."""
+    `lateral` (k,): each robot's offset from the path, counted as that much further behind (the way it still has to
+    come across to the column's line; `plan.reorder_lateral`). A copy."""
+    ahead = progress if lateral is None else progress - np.abs(lateral)
     by_place = np.argsort(rank)
     swapped = True
     while swapped:  # bubble passes: a few robots, each swap removes one inversion, so it ends
         swapped = False
         for i in range(len(by_place) - 1):
             a, b = by_place[i], by_place[i + 1]
-            if progress[b] > progress[a] + margin and progress[a] < until:
+            if ahead[b] > ahead[a] + margin and progress[a] < until:
                 by_place[i], by_place[i + 1] = b, a
                 swapped = True
     out = np.empty_like(rank)

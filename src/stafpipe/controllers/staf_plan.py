@@ -40,8 +40,7 @@ class StafPlan:
         self.cfg, self.goal_slots, self.divide, self.scenario = cfg, np.asarray(goal, float), divide, scenario
         self.kind, self.angle = spec.team.formation, spec.team.angle_deg
         self.spacing, self.radius = spec.team.spacing, spec.robot.radius
-        self.max_speed = spec.robot.max_speed
-        self.n = len(goal)
+        self.max_speed, self.n = spec.robot.max_speed, len(goal)
         self.goal = self.goal_slots.copy()
         """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are
         alike."""
@@ -94,9 +93,7 @@ class StafPlan:
         self.order: list[np.ndarray] = [np.arange(self.n)]  # robots of each subteam, leading subteam first
         self.slots = [self.full_slots / self.spacing]  # unit-spacing slots, row k for order[0][k]
         self.anchor = np.full(1, -1.0)  # set from the team's progress at the first step
-        self.split_done = False
-        self.regrouped = False
-        self.merging = False
+        self.split_done, self.regrouped, self.merging = False, False, False
         self.hold: list[np.ndarray | None] = [None]
         self.file_weights = [self.file_weight]  # per subteam: where it walks in single file
         self.ranks = [column_rank(self.slots[0], self.cfg.inside_out)]  # per subteam: each robot's column place
@@ -106,8 +103,7 @@ class StafPlan:
         # the way home at the regroup: each robot's target slides from where it was to its goal slot
         self.home_from = np.zeros((self.n, 2))
         self.home_via = np.zeros((self.n, 2))  # the way home: home_from -> home_via -> goal (via = from: straight)
-        self.home_frac = np.zeros(self.n)
-        self.home_rate = np.zeros(self.n)
+        self.home_frac, self.home_rate = np.zeros(self.n), np.zeros(self.n)
         self.homing = np.zeros(self.n, dtype=bool)
         self.limits: dict[int, float] = {}  # _short_of_taken of the current step, per subteam
         self.weights: dict[tuple[int, float], float] = {}  # _file_weight of the current step, per subteam and anchor
@@ -187,7 +183,7 @@ class StafPlan:
         self._release(progress)
         self._advance(progress, dt)
         if self.cfg.reorder:
-            self._follow_order(progress)
+            self._follow_order(progress, self.frame.lateral(pos, progress) if self.cfg.reorder_lateral else None)
         if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
             self._finish_regroup(pos)
             return self._home(dt)
@@ -459,19 +455,23 @@ class StafPlan:
         order (`column_rank`, then `_follow_order`)."""
         return self.anchor[j] + ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
 
-    def _follow_order(self, progress: np.ndarray) -> None:
+    def _follow_order(self, progress: np.ndarray, lateral: np.ndarray | None) -> None:
         """Moving subteams that are a column take their robots' order along the path (`plan.reorder`): two robots
         that swap places in the column swap their formation slots too, so that the column spreads back into the
-        formation without crossing ways."""
+        formation without crossing ways. `lateral` (n,), offsets from the path (`plan.reorder_lateral`): robots coming
+        in take places by it while the subteam turns into a column, slots only once it is one (side by side, robots
+        would cross for their slots)."""
         for j, idx in enumerate(self.order):
-            if self.hold[j] is not None or self._file_weight(j) < 1.0:
+            if self.hold[j] is not None or self._file_weight(j) < (1.0 if lateral is None else 1e-9):
                 continue
             whole = np.flatnonzero(self.file_weights[j] >= 1.0)  # where it is a column
-            rank = geo.follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds)
-            if (rank != self.ranks[j]).any():
-                by_place = np.argsort(self.ranks[j])  # the robot (row) at each place before
-                self.slots[j] = self.slots[j][by_place[rank]]
-                self.ranks[j] = rank
+            side = lateral if lateral is None else lateral[idx] * (progress[idx] < whole[0] * self.ds)
+            rank = geo.follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds, side)
+            if lateral is None and (rank != self.ranks[j]).any():
+                self.slots[j] = self.slots[j][np.argsort(self.ranks[j])[rank]]  # the robot (row) at each place before
+            elif lateral is not None and self._file_weight(j) >= 1.0:  # slots follow places once it is a column
+                self.slots[j] = self.slots[j][np.argsort(column_rank(self.slots[j], self.cfg.inside_out))[rank]]
+            self.ranks[j] = rank
 
     def _file_weight(self, j: int) -> float:
         """How far subteam j is turned into a column (0..1): the largest single-file weight along its column. Kept
