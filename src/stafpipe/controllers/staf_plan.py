@@ -465,7 +465,7 @@ class StafPlan:
             if self.hold[j] is not None or self._file_weight(j) < (1.0 if lateral is None else 1e-9):
                 continue
             whole = np.flatnonzero(self.file_weights[j] >= 1.0)  # where it is a column
-            side = lateral if lateral is None else lateral[idx] * (progress[idx] < whole[0] * self.ds)
+            side = None if lateral is None else lateral[idx] * (progress[idx] < whole[0] * self.ds)
             rank = geo.follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds, side)
             if lateral is None and (rank != self.ranks[j]).any():
                 self.slots[j] = self.slots[j][np.argsort(self.ranks[j])[rank]]  # the robot (row) at each place before
