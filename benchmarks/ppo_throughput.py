@@ -91,11 +91,21 @@ def update_flops(policy: DGNNPolicy, ro, tc: TrainPPOConfig) -> float:
     epochs."""
     t, b = ro.rewards.shape[:2]
     own, edge, mask = (x.reshape(t * b, *x.shape[2:]) for x in (ro.own, ro.edge, ro.mask))
-    with FlopCounterMode(display=False) as counter:
+
+    def step() -> None:
         mean, value = policy(own, edge, mask)
         (mean.square().mean() + value.square().mean()).backward()
+
+    flops = counted_flops(step)
     policy.zero_grad()
-    return tc.epochs * counter.get_total_flops() / ro.rewards.numel()
+    return tc.epochs * flops / ro.rewards.numel()
+
+
+def counted_flops(run) -> int:
+    """Floating-point operations torch's FlopCounterMode counts in one call of `run` (matrix products and the like)."""
+    with FlopCounterMode(display=False) as counter:
+        run()
+    return counter.get_total_flops()
 
 
 def best_seconds(run, device: torch.device, tries: int) -> float:
@@ -113,14 +123,19 @@ def best_seconds(run, device: torch.device, tries: int) -> float:
 def matmul_rate(device: torch.device) -> float:
     """FLOP/s of a 2048 x 2048 float32 matrix product, the best of five."""
     a = torch.randn(2048, 2048, device=device)
-    return 2 * 2048**3 / best_seconds(lambda: a @ a, device, 5)
+    return counted_flops(lambda: a @ a) / best_seconds(lambda: a @ a, device, 5)
 
 
 def layers_rate(device: torch.device) -> float:
-    """FLOP/s of forward and backward through eight 64 -> 64 linear layers on 16,000 rows, the best of ten."""
+    """FLOP/s of forward and backward through eight 64 -> 64 linear layers on 16,000 rows, the best of ten (counted as
+    the update is: the input needs no gradient, so the first layer's backward is one product, not two)."""
     layers = torch.nn.Sequential(*(torch.nn.Linear(64, 64) for _ in range(8))).to(device)
     x = torch.randn(16_000, 64, device=device)
-    return 3 * 2 * 16_000 * 64 * 64 * 8 / best_seconds(lambda: layers(x).sum().backward(), device, 10)
+
+    def run() -> None:
+        layers(x).sum().backward()
+
+    return counted_flops(run) / best_seconds(run, device, 10)
 
 
 def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig, device: torch.device) -> float:

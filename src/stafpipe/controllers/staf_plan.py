@@ -42,8 +42,7 @@ class StafPlan:
         self.spacing, self.radius = spec.team.spacing, spec.robot.radius
         self.max_speed, self.n = spec.robot.max_speed, len(goal)
         self.goal = self.goal_slots.copy()
-        """Each robot's goal slot; at the regroup the slots are reassigned to the robots (Hungarian): robots are
-        alike."""
+        """Each robot's goal slot; reassigned to the robots at the regroup (Hungarian): robots are alike."""
         self.frame = PathFrame(path, extend=cfg.extend_path)
         w, keep = spec.world, self.radius + cfg.margin  # `in_world`: targets a radius and the margin off its edge
         self.bounds = (np.array([w.xmin + keep, w.ymin + keep]), np.array([w.xmax - keep, w.ymax - keep]))
@@ -183,7 +182,7 @@ class StafPlan:
         self._release(progress)
         self._advance(progress, dt)
         if self.cfg.reorder:
-            self._follow_order(progress, self.frame.lateral(pos, progress) if self.cfg.reorder_lateral else None)
+            self._follow_order(progress, pos)
         if not self.split_done and self.anchor[0] >= self.frame.length:  # never split: the path's end is the goal
             self._finish_regroup(pos)
             return self._home(dt)
@@ -396,8 +395,7 @@ class StafPlan:
         return self.limits[j]
 
     def _clear_ways(self, starts: np.ndarray, slots: np.ndarray) -> bool:
-        """Whether every way home from `starts` to any of `slots` (through its via point) keeps a body clear of the
-        obstacles."""
+        """Whether every way home from `starts` to any of `slots` (through its via point) keeps clear of obstacles."""
         if not len(starts) or not len(slots):
             return True
         a = np.repeat(starts, len(slots), axis=0)
@@ -455,17 +453,20 @@ class StafPlan:
         order (`column_rank`, then `_follow_order`)."""
         return self.anchor[j] + ((len(self.order[j]) - 1) / 2 - self.ranks[j]) * self.spacing
 
-    def _follow_order(self, progress: np.ndarray, lateral: np.ndarray | None) -> None:
+    def _follow_order(self, progress: np.ndarray, pos: np.ndarray) -> None:
         """Moving subteams that are a column take their robots' order along the path (`plan.reorder`): two robots
         that swap places in the column swap their formation slots too, so that the column spreads back into the
-        formation without crossing ways. `lateral` (n,), offsets from the path (`plan.reorder_lateral`): robots coming
-        in take places by it while the subteam turns into a column, slots only once it is one (side by side, robots
-        would cross for their slots)."""
+        formation without crossing ways. `plan.reorder_lateral`: robots coming in take places by their offsets from
+        the path too while the subteam turns into a column, slots once it is one (side by side they would cross)."""
+        lateral: np.ndarray | None = None
         for j, idx in enumerate(self.order):
-            if self.hold[j] is not None or self._file_weight(j) < (1.0 if lateral is None else 1e-9):
+            if self.hold[j] is not None or self._file_weight(j) < (1e-9 if self.cfg.reorder_lateral else 1.0):
                 continue
             whole = np.flatnonzero(self.file_weights[j] >= 1.0)  # where it is a column
-            side = None if lateral is None else lateral[idx] * (progress[idx] < whole[0] * self.ds)
+            side = None
+            if self.cfg.reorder_lateral:  # offsets from the path: once a step, where a subteam turns into a column
+                lateral = self.frame.lateral(pos, progress) if lateral is None else lateral
+                side = lateral[idx] * (progress[idx] < whole[0] * self.ds)
             rank = geo.follow_order(self.ranks[j], progress[idx], self.spacing / 2, whole[-1] * self.ds, side)
             if lateral is None and (rank != self.ranks[j]).any():
                 self.slots[j] = self.slots[j][np.argsort(self.ranks[j])[rank]]  # the robot (row) at each place before
@@ -491,8 +492,7 @@ class StafPlan:
     def expected(self) -> np.ndarray:
         """(n, n) d_ij of R^adp (STAF Sec. 3): the distance between two robots' targets, i.e. between their slots in
         their subteam's formation (shrunk with adapt=geometric, nominal with adapt=nominal; blended into a column in
-        single file) or, at the regroup, between their targets sliding to the goal slots. Only same-subteam pairs are
-        used."""
+        single file) or, at the regroup, between their targets sliding to the goal slots (same-subteam pairs used)."""
         return np.linalg.norm(self.targets[:, None] - self.targets[None], axis=-1)
 
     def drain_events(self) -> list[tuple[str, list[int], str]]:

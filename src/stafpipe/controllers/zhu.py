@@ -379,17 +379,16 @@ class ZhuController(Controller):
             zip(ids, intersect_all([[self.regions[i] for i in self.teams[k]] for k in ids]), strict=True)
         )
         room = self._clear_of_other_teams(p) if len(ids) > 1 else {}
-        # ours: at the goal every team heads for the goal slots one assignment of all robots gives its members, so
-        # that robots of two teams do not cross for each other's slots (home_slots)
-        home = self.goal[assign_slots(p, self.goal)] if at_end and self.cfg.home_slots else self.goal
+        # at the goal a team takes the goal slots one assignment of all robots gives its members (the whole team: all
+        # of them; ours, home_slots: every team not left behind out of sight, so that no two teams cross for slots)
+        home = self.goal[assign_slots(p, self.goal)] if at_end else self.goal
         for k, members in self.teams.items():
+            if at_end and (len(members) == self.n or (self.cfg.home_slots and not self._blind(members, p))):
+                self._targets[members] = home[members]
+                continue
             ref, heading = self.team_reference(members, p)
             region = intersect_all([[self.common[k], room[k]]])[0] if k in room else self.common[k]
-            slots: np.ndarray | None
-            if at_end and (len(members) == self.n or (self.cfg.home_slots and not self._blind(members, p))):
-                slots = home[members]  # the goal formation; a team left behind out of sight of it follows the path
-            else:
-                slots = self._fit(k, region, len(members), ref, heading)
+            slots = self._fit(k, region, len(members), ref, heading)
             if slots is None:  # no formation fits: each robot on its own, as [20] breaks the formation; each heads
                 # for where the team's shift to p_r takes it, kept inside its own region (towards p_r itself, every
                 # robot got the same target and only the local planner kept them apart: 10 contacts per Scenario 2)
