@@ -62,7 +62,7 @@ def main() -> None:
     print(f"torch {torch.__version__}, cpu, {torch.get_num_threads()} threads")
     print(f"{'policy':>6} | {'minibatch':>9} | {'eager us/sample':>15} | {'compiled us/sample':>18} | {'compile s':>9}")
     print("-" * 70)
-    for name, make, sizes in (("dgnn", DGNNPolicy, (OWN, EDGE)), ("staf", StafPolicy, (STAF_OWN, STAF_EDGE))):
+    for name, make, sizes in (("dgnn", DGNNPolicy, (OWN, EDGE)), ("staf_planned", StafPolicy, (STAF_OWN, STAF_EDGE))):
         for mb in args.minibatch:
             torch.manual_seed(0)
             eager = make(PolicyConfig())

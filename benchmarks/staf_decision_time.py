@@ -2,13 +2,13 @@
 
 Usage: python benchmarks/staf_decision_time.py [--repeats 30] [--episodes 40] [--maps corridor doorway ...]
        [--ensemble B.pt C.pt]  (the 10-robot rows with `method.ensemble`: one forward pass more per member;
-       `--ensemble` alone: the shipped `staf.pt` by itself)
+       `--ensemble` alone: the shipped `staf_planned.pt` by itself)
 Targets (STAF issue): 10 robots <= 1 ms per step, 1,000 robots <= 50 ms. One torch thread, the shipped policy (its two
-runs averaged, as `method=staf` runs it) and deep graph cut. 10 robots: `method=staf`'s own act() on the corridor
-(dense features from the harness' observation), timed per step over whole episodes; the split step (which runs the
-cut) is reported apart. 1,000 robots: a 40 x 25 grid of robots (1 m spacing) heading through a 1 km corridor,
-edge-list features (k-d tree within 2 m) and the edge-list forward pass; sensing (the harness' observation) is not
-part of the decision and is excluded.
+runs averaged, as `method=staf_planned` runs it) and deep graph cut. 10 robots: `method=staf_planned`'s own act() on the
+corridor (dense features from the harness' observation), timed per step over whole episodes; the split step (which runs
+the cut) is reported apart. 1,000 robots: a 40 x 25 grid of robots (1 m spacing) heading through a 1 km corridor,
+edge-list features (k-d tree within 2 m) and the edge-list forward pass; sensing (the harness' observation) is not part
+of the decision and is excluded.
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def thousand_robots(repeats: int, ensemble: list[str] | None = None) -> tuple[fl
         team=dataclasses.replace(base.spec.team, formation="square", n=1000, start=[0.0, 6.0], goal=[1000.0, 6.0]),
     )
     sc = build_scenario(spec)
-    policies = [load_policy(path, "staf")[0] for path in ["", *ensemble_paths("", ensemble, "staf")]]
+    policies = [load_policy(path, "staf_planned")[0] for path in ["", *ensemble_paths("", ensemble, "staf_planned")]]
     policy = policies[0]
     template = sc.template()
     pos = template + [0.0, 6.0]
@@ -103,7 +103,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=40, help="10-robot episodes timed per map")
     parser.add_argument("--maps", nargs="+", default=["corridor"], help="built-in maps of the 10-robot rows")
     parser.add_argument(
-        "--ensemble", nargs="*", default=None, help="policy.pt files averaged with staf.pt (none: it alone)"
+        "--ensemble", nargs="*", default=None, help="policy.pt files averaged with staf_planned.pt (none: it alone)"
     )
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -111,8 +111,8 @@ def main() -> None:
     plan, feat, net, edges = thousand_robots(args.repeats, args.ensemble)
     print("| team | per step (median) | 99th percentile step | split step (cut, median) | target |")
     print("|---|---|---|---|---|")
-    runs = 1 + len(ensemble_paths("", args.ensemble, "staf"))
-    what = f"method=staf, {runs} run{'s' if runs > 1 else ''}"
+    runs = 1 + len(ensemble_paths("", args.ensemble, "staf_planned"))
+    what = f"method=staf_planned, {runs} run{'s' if runs > 1 else ''}"
     for name, median, worst, split in rows:
         print(f"| 10 robots, {name}, {what} act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
     print(

@@ -1,6 +1,6 @@
-"""Wall time of the whole STAF Table-1 reproduction: `stafpipe run staf_train` (training maps, warm start and PPO for
-STAF's phi + psi) then `stafpipe run staf_table1` (STAF, DGNN and L&F x circle, wedge, line x 50 episodes, the tables
-and Fig. 4), every step forced, into a temporary output folder (nothing under outputs/ is touched).
+"""Wall time of the whole STAF-planned Table-1 reproduction: `stafpipe run staf_planned_train` (training maps, warm
+start and PPO for phi + psi) then `stafpipe run staf_table1` (STAF-planned, DGNN and L&F x circle, wedge, line x 50
+episodes, the tables and Fig. 4), every step forced, into a temporary output folder (nothing under outputs/ is touched).
 
 Usage: python benchmarks/staf_table1_time.py [--keep DIR]
 Target (STAF issue): train + evaluate <= 45 minutes on 2 CPU cores. Takes about that long; prints one row per step.
@@ -53,7 +53,7 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(args.keep or tmp)
-        rows = timed("staf_train", root) + timed("staf_table1", root)
+        rows = timed("staf_planned_train", root) + timed("staf_table1", root)
     print("| step | stage | wall (s) |")
     print("|---|---|---|")
     for step, stage, seconds in rows:

@@ -75,12 +75,12 @@ def _flipped(tmp: Path) -> bytes:
 
 
 MAKERS = {
-    "@policy_other_shape": lambda tmp: _policy(tmp, "staf", 16, recorded_hidden=64),
+    "@policy_other_shape": lambda tmp: _policy(tmp, "staf_planned", 16, recorded_hidden=64),
     "@policy_small": lambda tmp: _policy(tmp, "dgnn", 8),
-    "@policy_small_staf": lambda tmp: _policy(tmp, "staf", 8),
+    "@policy_small_staf": lambda tmp: _policy(tmp, "staf_planned", 8),
     "@episode_log_flipped": _flipped,
     "@episode_log_truncated": lambda tmp: episode_log(tmp)[:3000],
-    "@truncated staf.pt": lambda tmp: (CHECKPOINTS / "staf.pt").read_bytes()[:5000],
+    "@truncated staf_planned.pt": lambda tmp: (CHECKPOINTS / "staf_planned.pt").read_bytes()[:5000],
     "@truncated high_level.pt": lambda tmp: (CHECKPOINTS / "high_level.pt").read_bytes()[:5000],
 }
 

@@ -57,14 +57,14 @@ def test_every_message_matches_the_library_encoder_byte_for_byte(n) -> None:
     assert cdr.team_state(t, pos, vel, heading, targets, subteams, movers) == _library_bytes("/robots/state", state)
     context = json.dumps({"eta": 2.17, "name": "é"})
     info = {
-        "method": "staf",
+        "method": "staf_planned",
         "seed": -3 + n,
         "scenario_yaml": "a: 1\n" * n,
         "context_json": context,
         "goal_x": pos[:, 0].tolist(),
         "goal_y": pos[:, 1].tolist(),
     }
-    assert cdr.episode_info("staf", -3 + n, "a: 1\n" * n, context, pos) == _library_bytes("/episode", info)
+    assert cdr.episode_info("staf_planned", -3 + n, "a: 1\n" * n, context, pos) == _library_bytes("/episode", info)
     robots = list(range(n))
     event = {"time": t, "step": 5 * n, "kind": "split", "robots": robots, "detail": "x" * n}
     assert cdr.event(t, 5 * n, "split", robots, "x" * n) == _library_bytes("/events", event)

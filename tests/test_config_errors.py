@@ -40,7 +40,11 @@ def test_bad_key_in_a_sweep_runs_no_job(workdir, capsys) -> None:
     [
         (["eval.episode=3"], "eval.episode is not a setting of `stafpipe eval` (did you mean eval.episodes?)"),
         (["evl.episodes=3"], "(did you mean eval?)"),
-        (["method=stf"], "method=stf: no such method (did you mean method=staf?); choose one of: cezayirli, dgnn, lf"),
+        (
+            ["method=staf_planed"],
+            "method=staf_planed: no such method (did you mean method=staf_planned?); "
+            "choose one of: cezayirli, dgnn, lf",
+        ),
         (["-m", "method=straight,stf"], "method=stf: no such method"),  # a bad value anywhere in a sweep: no job runs
         (["robot=diffdrive"], "did you mean robot=diff_drive?"),
         (["scenario.team.n=many"], "scenario.team.n: Value 'many'"),

@@ -47,12 +47,12 @@ def test_training_on_cuda_writes_checkpoints_for_the_cpu(workdir) -> None:
 def test_staf_training_on_cuda_matches_the_cpu_within_float_rounding(workdir) -> None:
     """STAF's network (the pair map, the warm start on the CPU, then PPO's update on the GPU) trains there and comes
     back to the CPU, and its weights are the CPU run's to float rounding: the same samples, the same steps."""
-    staf = [*PPO, "train_ppo.method=staf", "train_ppo.imitation.epochs=1", "train_ppo.imitation.rollouts=1"]
-    assert launch("train-ppo", [*staf, "train_ppo.device=cpu"]) == 0
-    assert launch("train-ppo", [*staf, "train_ppo.device=cuda"]) == 0
-    runs = {load_policy(str(d / "policy.pt"), "staf")[1]["train_ppo"]["device"]: d for d in job_dirs(workdir)}
-    on_cpu, _ = load_policy(str(runs["cpu"] / "policy.pt"), "staf")
-    on_gpu, _ = load_policy(str(runs["cuda"] / "policy.pt"), "staf")
+    planned = [*PPO, "train_ppo.method=staf_planned", "train_ppo.imitation.epochs=1", "train_ppo.imitation.rollouts=1"]
+    assert launch("train-ppo", [*planned, "train_ppo.device=cpu"]) == 0
+    assert launch("train-ppo", [*planned, "train_ppo.device=cuda"]) == 0
+    runs = {load_policy(str(d / "policy.pt"), "staf_planned")[1]["train_ppo"]["device"]: d for d in job_dirs(workdir)}
+    on_cpu, _ = load_policy(str(runs["cpu"] / "policy.pt"), "staf_planned")
+    on_gpu, _ = load_policy(str(runs["cuda"] / "policy.pt"), "staf_planned")
     for (name, a), b in zip(on_cpu.state_dict().items(), on_gpu.state_dict().values(), strict=True):
         assert b.device.type == "cpu"
         assert torch.allclose(a, b, rtol=1e-3, atol=1e-4), name

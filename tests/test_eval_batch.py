@@ -49,7 +49,7 @@ SLOW = pytest.mark.slow  # 1-2 s each; together they would push `-m "not slow"` 
 @pytest.mark.parametrize(
     "method",
     ["straight", "cezayirli", pytest.param("lf", marks=SLOW), pytest.param("zhu", marks=SLOW)]
-    + [pytest.param("dgnn", marks=SLOW), pytest.param("staf", marks=SLOW)],
+    + [pytest.param("dgnn", marks=SLOW), pytest.param("staf_planned", marks=SLOW)],
 )
 def test_a_batch_gives_each_episode_exactly_as_alone(method, tmp_path) -> None:
     corridor = load_named_scenario("corridor")

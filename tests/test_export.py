@@ -59,7 +59,7 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
 
 
 @pytest.mark.slow  # three exports, about 10 s
-@pytest.mark.parametrize("method", ["staf", "dgnn"])
+@pytest.mark.parametrize("method", ["staf_planned", "dgnn"])
 def test_policy_onnx_matches_torch_on_recorded_observations(workdir, method: str) -> None:
     from stafpipe.learning.checkpoint import ensemble_paths, load_policy
 
@@ -69,7 +69,7 @@ def test_policy_onnx_matches_torch_on_recorded_observations(workdir, method: str
     assert [i.name for i in session.get_inputs()] == ["own", "edge", "mask"]
     # the shipped policy as eval runs it: STAF's two runs averaged (method.ensemble unset), DGNN's one
     runs = [load_policy(path, method)[0] for path in ["", *ensemble_paths("", None, method)]]
-    assert len(runs) == {"staf": 2, "dgnn": 1}[method]
+    assert len(runs) == {"staf_planned": 2, "dgnn": 1}[method]
     worst = 0.0
     for n in (4, 10, 13):
         for own, edge, mask in recorded_features(method, n):
@@ -124,7 +124,7 @@ def test_a_drive_input_network_is_exported_with_the_drive_flag_in_its_own_state(
     from stafpipe.learning.staf_net import StafPolicy
 
     module = PolicyMean(StafPolicy(PolicyConfig(hidden=8, drive_input=True)))
-    inputs = example_inputs("staf", module)
+    inputs = example_inputs("staf_planned", module)
     assert inputs["own"].shape[-1] == STAF_OWN + 1
     assert module(**inputs).shape == (5, 2)
 
@@ -138,21 +138,23 @@ def test_the_exported_policy_is_the_one_eval_runs_and_bad_ensembles_are_refused(
     from stafpipe.learning.config import PolicyConfig
     from stafpipe.learning.staf_net import StafPolicy
 
-    own, edge, mask = recorded_features("staf", 6, steps=11)[-1]
+    own, edge, mask = recorded_features("staf_planned", 6, steps=11)[-1]
     x = (torch.from_numpy(own), torch.from_numpy(edge), torch.from_numpy(mask))
-    first, second = (load_policy(p, "staf")[0] for p in ("", "shipped:staf_seed1"))
+    first, second = (load_policy(p, "staf_planned")[0] for p in ("", "shipped:staf_planned_seed1"))
     with torch.no_grad():
         pair, alone = (torch.stack([r.act(*x) for r in runs]).mean(0) for runs in ([first, second], [first]))
-        shipped, made_by = load_network("staf")
+        shipped, made_by = load_network("staf_planned")
         assert torch.equal(shipped(*x), pair) and not torch.allclose(pair, alone, atol=1e-3)
-        assert [m["path"] for m in made_by["ensemble"]] == ["shipped:staf_seed1"]
+        assert [m["path"] for m in made_by["ensemble"]] == ["shipped:staf_planned_seed1"]
         assert made_by["ensemble"][0]["made_by"]["seed"] == 1
-        assert torch.equal(load_network("staf", ensemble=[])[0](*x), alone)
-        assert torch.equal(load_network("staf", "shipped:staf")[0](*x), alone)  # a named checkpoint: no partners
-    save_policy(workdir / "small.pt", "staf", StafPolicy(PolicyConfig(hidden=32)), {})
+        assert torch.equal(load_network("staf_planned", ensemble=[])[0](*x), alone)
+        assert torch.equal(
+            load_network("staf_planned", "shipped:staf_planned")[0](*x), alone
+        )  # a named checkpoint: no partners
+    save_policy(workdir / "small.pt", "staf_planned", StafPolicy(PolicyConfig(hidden=32)), {})
     with pytest.raises(StafpipeError, match=r"ensemble\[0\].*another network"):
-        load_network("staf", ensemble=[str(workdir / "small.pt")])
-    result = CliRunner().invoke(app, ["export", "high", "--ensemble", "shipped:staf_seed1"])
+        load_network("staf_planned", ensemble=[str(workdir / "small.pt")])
+    result = CliRunner().invoke(app, ["export", "high", "--ensemble", "shipped:staf_planned_seed1"])
     assert result.exit_code == 2 and "not the deep graph cut" in result.output
-    result = CliRunner().invoke(app, ["export", "staf", "--ensemble", "x.pt", "--no-ensemble"])
+    result = CliRunner().invoke(app, ["export", "staf_planned", "--ensemble", "x.pt", "--no-ensemble"])
     assert result.exit_code == 2 and "together" in result.output

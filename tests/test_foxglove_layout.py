@@ -34,7 +34,7 @@ def test_every_path_of_the_layout_reads_a_field_of_an_episode_log(workdir) -> No
     layout = json.loads(LAYOUT.read_text())
     panels = set(re.findall(r'"([A-Za-z0-9]+![A-Za-z0-9]+)"', json.dumps(layout["layout"])))
     assert panels == set(layout["configById"])  # every panel placed, every placed panel configured
-    assert launch("eval", ["method=staf", "eval.episodes=1", "scenario.time_limit=2"]) == 0
+    assert launch("eval", ["method=staf_planned", "eval.episodes=1", "scenario.time_limit=2"]) == 0
     [run] = job_dirs(workdir)
     first: dict[str, object] = {}
     with open(run / "episodes" / "episode_0000.mcap", "rb") as f:

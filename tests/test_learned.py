@@ -37,8 +37,8 @@ from stafpipe.world import WorldConfig, Worlds
 def test_trainer_has_no_method_name_branches() -> None:
     """A new learned method is a network, an adapter and a config: the trainer never names one."""
     for module in (ppo, rollout, train_stage):
-        assert not re.search(r"""["'](staf|dgnn)["']""", inspect.getsource(module)), module.__name__
-    assert set(ADAPTERS) == {"dgnn", "staf"}
+        assert not re.search(r"""["'](staf_planned|staf|dgnn)["']""", inspect.getsource(module)), module.__name__
+    assert set(ADAPTERS) == {"dgnn", "staf_planned"}
 
 
 def _team(sc, worlds: Worlds, w: int = 0) -> TeamInfo:
@@ -73,14 +73,16 @@ def test_dgnn_is_guided_through_the_middle_of_a_passage_its_shortest_path_hugs()
     assert guided > team.passage_width / 2 - 0.1  # the guide keeps to the middle: 1.41 m from either wall
 
 
-@pytest.mark.parametrize("method", ["dgnn", "staf"])
+@pytest.mark.parametrize("method", ["dgnn", "staf_planned"])
 def test_controller_acts_as_the_rollout_adapter_does(method) -> None:
     """The evaluation controller and the training rollout drive the same network through the same adapter: the
     controller's command equals the policy mean on the adapter's batched features, step after step."""
     sc = load_named_scenario("corridor")
     cfg = {
         "dgnn": lambda: __import__("stafpipe.controllers.dgnn", fromlist=["x"]).DGNNConfig(),
-        "staf": lambda: StafMethodConfig(ensemble=[]),  # the checkpoint alone (the default adds its partner run)
+        "staf_planned": lambda: StafMethodConfig(
+            ensemble=[]
+        ),  # the checkpoint alone (the default adds its partner run)
     }[method]()
     ctrl = make_controller(cfg)
     worlds = Worlds([sc], SensingConfig())
@@ -218,7 +220,7 @@ def test_imitation_teacher_aims_where_the_network_does_unless_privileged() -> No
     team, gaps = _team(sc, worlds), {}
     for privileged in (False, True):
         plan = PlanConfig(adapt="nominal", balance=True)
-        adapter = ADAPTERS["staf"](PolicyConfig(), TrainPPOConfig().reward, plan, 2.0)
+        adapter = ADAPTERS["staf_planned"](PolicyConfig(), TrainPPOConfig().reward, plan, 2.0)
         adapter.begin([team], privileged=privileged)
         pos, gap = obs.position.copy(), 0.0
         for _ in range(400):  # robots step straight to their targets (1 m/s, 0.1 s)
@@ -236,7 +238,7 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
     sc = load_named_scenario("corridor")
     ctx, path = episode_context(sc, Geometry(sc), SensingConfig(), 0.3, 0.1)
     tc = TrainPPOConfig(
-        method="staf",
+        method="staf_planned",
         worlds=2,
         episode_steps=30,
         policy=PolicyConfig(hidden=32),
@@ -245,7 +247,7 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
         # state like those it trains on); on the extended path they start at the robots
         plan=PlanConfig(extend_path=False),
     )
-    adapter = ADAPTERS["staf"](tc.policy, tc.reward, tc.plan, 2.0)
+    adapter = ADAPTERS["staf_planned"](tc.policy, tc.reward, tc.plan, 2.0)
     torch.manual_seed(0)
     policy = adapter.network(tc.policy)
     # exact positions and small start offsets, so the states judged are like the 60 it trains on
@@ -274,7 +276,7 @@ def test_staf_ablation_low_levels_run_and_are_refused_when_unknown(workdir) -> N
             launch(
                 "eval",
                 [
-                    "method=staf",
+                    "method=staf_planned",
                     f"method.low_level={low}",
                     "method.plan.adapt=geometric",
                     "eval.episodes=1",
@@ -284,9 +286,9 @@ def test_staf_ablation_low_levels_run_and_are_refused_when_unknown(workdir) -> N
             )
             == 0
         )
-    assert launch("eval", ["method=staf", "method.low_level=magic", "eval.episodes=1"]) == 2
+    assert launch("eval", ["method=staf_planned", "method.low_level=magic", "eval.episodes=1"]) == 2
     assert launch("eval", ["method=dgnn", "method.low_level=magic", "eval.episodes=1"]) == 2
-    assert launch("eval", ["method=staf", "method.plan.adapt=squeeze", "eval.episodes=1"]) == 2
+    assert launch("eval", ["method=staf_planned", "method.plan.adapt=squeeze", "eval.episodes=1"]) == 2
     runs = job_dirs(workdir)
     assert len(runs) == 2
     import pandas as pd
@@ -300,13 +302,15 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
     from stafpipe.controllers.learned import checkpoint_mismatch
 
     # the shipped STAF policy was trained with two subteams: m=auto is another plan than the one it learned on
-    assert launch("eval", ["method=staf", "method.plan.m=auto", "eval.episodes=1", "scenario.time_limit=2"]) == 2
+    assert (
+        launch("eval", ["method=staf_planned", "method.plan.m=auto", "eval.episodes=1", "scenario.time_limit=2"]) == 2
+    )
     assert not job_dirs(workdir)
     assert (
         launch(
             "eval",
             [
-                "method=staf",
+                "method=staf_planned",
                 "method.plan.m=auto",
                 "method.allow_mismatch=true",
                 "eval.episodes=1",
@@ -320,7 +324,7 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
         launch(
             "eval",
             [
-                "method=staf",
+                "method=staf_planned",
                 "method.low_level=proportional",
                 "method.plan.adapt=nominal",
                 "eval.episodes=1",
@@ -385,7 +389,7 @@ def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> Non
         launch(
             "train-ppo",
             [
-                "train_ppo.method=staf",
+                "train_ppo.method=staf_planned",
                 "train_ppo.scenarios=[maps/maps]",
                 "train_ppo.formations=[]",
                 "train_ppo.iterations=1",
@@ -398,7 +402,7 @@ def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> Non
         )
         == 0
     )
-    _policy, made_by = load_policy(workdir / "train" / "policy.pt", "staf")
+    _policy, made_by = load_policy(workdir / "train" / "policy.pt", "staf_planned")
     assert made_by["training_maps"] == sorted(made_by["training_maps"]) and len(made_by["training_maps"]) == 2
     assert all(name.startswith("gen5_") for name in made_by["training_maps"])
     assert made_by["max_speed"] == 1.0  # the generated maps' robots
@@ -411,7 +415,7 @@ def test_plot_table_draws_labelled_variants_side_by_side(workdir) -> None:
     import pandas as pd
 
     row = {
-        "method": "staf",
+        "method": "staf_planned",
         "formation": "line",
         "n": 10,
         "drive": "holonomic",
@@ -434,8 +438,8 @@ def test_plot_table_draws_labelled_variants_side_by_side(workdir) -> None:
     assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{','.join(dirs)}]"]) == 0
     [run] = [d for d in job_dirs(workdir) if (d / "table.md").is_file()]
     text = (run / "table.md").read_text()
-    rows = [line for line in text.splitlines() if line.startswith("| staf")]
-    assert len(rows) == 2 and "staf (a-no-learning)" in rows[0] and "staf (b-learned)" in rows[1]
+    rows = [line for line in text.splitlines() if line.startswith("| STAF-planned (ours)")]
+    assert len(rows) == 2 and "(ours) (a-no-learning)" in rows[0] and "(ours) (b-learned)" in rows[1]
     assert not any("[" in r for r in rows)  # the paper's numbers are not beside a variant
     assert (run / "levels.png").is_file()
     table = pd.read_csv(run / "table.csv")

@@ -20,7 +20,7 @@ from stafpipe.world import WorldConfig, Worlds
 pettingzoo = pytest.importorskip("pettingzoo")  # the `marl` extra (installed with `test`)
 
 
-@pytest.mark.parametrize(("method", "formation"), [("dgnn", None), ("staf", "wedge")])
+@pytest.mark.parametrize(("method", "formation"), [("dgnn", None), ("staf_planned", "wedge")])
 def test_parallel_env_passes_the_pettingzoo_api_test(method, formation) -> None:
     from pettingzoo.test import parallel_api_test
 
@@ -55,7 +55,7 @@ def test_seeded_episodes_repeat_exactly() -> None:
     assert run(4) == run(4) and run(4) != run(5)
 
 
-@pytest.mark.parametrize("method", ["dgnn", "staf"])
+@pytest.mark.parametrize("method", ["dgnn", "staf_planned"])
 def test_batched_env_rewards_are_the_trainers(method) -> None:
     policy_cfg = PolicyConfig(hidden=16)
     policy = build_policy(method, policy_cfg)

@@ -72,7 +72,7 @@ def test_staf_keeps_clear_of_a_walker_that_crosses_its_way() -> None:
     for avoid in (True, False):
         controller = StafController(StafMethodConfig(avoid_movers=avoid))
         runs = [
-            run_episode(sc, Geometry.of(sc), controller, "staf", seed, WorldConfig(), SensingConfig(), 0.3, 0.1)
+            run_episode(sc, Geometry.of(sc), controller, "staf_planned", seed, WorldConfig(), SensingConfig(), 0.3, 0.1)
             for seed in range(3)
         ]
         contacts[avoid] = sum(r["collisions"] for r in runs)

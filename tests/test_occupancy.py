@@ -149,7 +149,10 @@ def test_staf_crosses_the_office_map(workdir) -> None:
     from conftest import job_dirs
     from stafpipe.launch import launch
 
-    assert launch("eval", ["method=staf", "scenario=office_map", "eval.episodes=2", "eval.log_episodes=false"]) == 0
+    assert (
+        launch("eval", ["method=staf_planned", "scenario=office_map", "eval.episodes=2", "eval.log_episodes=false"])
+        == 0
+    )
     [run] = job_dirs(workdir)
     results = pd.read_parquet(run / "results.parquet")
     assert (results.sr == 1.0).all() and (results.collisions == 0).all()

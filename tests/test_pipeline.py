@@ -109,12 +109,12 @@ def test_a_users_config_dir_serves_a_stage_and_every_pipeline_step(workdir, caps
 
 
 @pytest.mark.slow  # composes the pipeline's seven steps: about 4-5 s
-def test_staf_train_is_the_recipe_of_both_shipped_staf_runs(tmp_path) -> None:
-    """`stafpipe run staf_train`'s two train steps compose to the configs recorded beside `staf.pt` and
-    `staf_seed1.pt`: the same seed, training, sensing, world and robot settings, and the same map steps (named by step;
-    their directories' hashes change with any new config key). A plan setting added since is compared as the
-    controller compares a checkpoint's record: only the keys the record has; a world setting added since must be at
-    its default (`world.start_kick`: 0). A recipe edited without retraining fails here."""
+def test_staf_planned_train_is_the_recipe_of_both_shipped_runs(tmp_path) -> None:
+    """`stafpipe run staf_planned_train`'s two train steps compose to the configs recorded beside `staf_planned.pt` and
+    `staf_planned_seed1.pt`: the same seed, training, sensing, world and robot settings, and the same map steps (named
+    by step; their directories' hashes change with any new config key). A plan setting added since is compared as the
+    controller compares a checkpoint's record: only the keys the record has; a world setting added since must be at its
+    default (`world.start_kick`: 0). A recipe edited without retraining fails here."""
     import re
 
     import yaml
@@ -124,12 +124,15 @@ def test_staf_train_is_the_recipe_of_both_shipped_staf_runs(tmp_path) -> None:
     from stafpipe.pipeline import find_pipeline, load_pipeline, plan_pipeline
     from stafpipe.world import WorldConfig
 
-    steps = {s.name: cfg for s, _, _, _, cfg in plan_pipeline(load_pipeline(find_pipeline("staf_train")), tmp_path, [])}
+    steps = {
+        s.name: cfg
+        for s, _, _, _, cfg in plan_pipeline(load_pipeline(find_pipeline("staf_planned_train")), tmp_path, [])
+    }
 
     def read(text: str) -> dict:
         return yaml.safe_load(re.sub(r"(/\d\d-[A-Za-z0-9_]+)-[0-9a-f]{10}/", r"\1/", text))
 
-    for step, shipped in (("train", "staf"), ("train_seed1", "staf_seed1")):
+    for step, shipped in (("train", "staf_planned"), ("train_seed1", "staf_planned_seed1")):
         text = OmegaConf.to_yaml(steps[step], resolve=True).replace(f"{tmp_path.resolve()}/", "outputs/")
         ours = read(text)
         recorded = read((package_dir() / "checkpoints" / f"{shipped}.yaml").read_text())

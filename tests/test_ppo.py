@@ -158,9 +158,9 @@ def test_bad_policy_checkpoint_and_settings_are_refused(workdir) -> None:
     assert launch("eval", ["method=dgnn", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
     assert launch("train-ppo", [*TINY, "train_ppo.clip=1.5"]) == 2
     assert launch("train-ppo", [*TINY, "train_ppo.team_sizes=[1]"]) == 2
-    assert launch("train-ppo", [*TINY, "train_ppo.method=staf", "train_ppo.plan.m=7"]) == 2
-    assert launch("eval", ["method=staf", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
-    assert launch("eval", ["method=staf", "method.plan.speed=0", "eval.episodes=1"]) == 2
+    assert launch("train-ppo", [*TINY, "train_ppo.method=staf_planned", "train_ppo.plan.m=7"]) == 2
+    assert launch("eval", ["method=staf_planned", "method.checkpoint=junk.pt", "eval.episodes=1"]) == 2
+    assert launch("eval", ["method=staf_planned", "method.plan.speed=0", "eval.episodes=1"]) == 2
     assert not job_dirs(workdir)
 
 
@@ -248,9 +248,9 @@ def test_wall_copies_add_relabelled_near_wall_states() -> None:
     from stafpipe.learning.teachers import NEAR_WALL_GAP
 
     im = ImitationConfig(epochs=1, teacher="avoiding", noise=0.0, wall_copies=1.0)
-    tc = TrainPPOConfig(method="staf", worlds=1, episode_steps=20, policy=PolicyConfig(hidden=16), imitation=im)
+    tc = TrainPPOConfig(method="staf_planned", worlds=1, episode_steps=20, policy=PolicyConfig(hidden=16), imitation=im)
     corridor = load_named_scenario("corridor")
-    adapter = ADAPTERS["staf"](tc.policy, RewardConfig(), None, 2.0)
+    adapter = ADAPTERS["staf_planned"](tc.policy, RewardConfig(), None, 2.0)
     drawn = [(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)]
     own, _edge, _mask, label, _w = _teacher_samples(
         None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0)
@@ -349,7 +349,7 @@ def test_drive_input_and_direction_weight_are_checked() -> None:
         TrainPPOConfig(method="dgnn", policy=PolicyConfig(drive_input=True)).check()
     with pytest.raises(StafpipeError, match=r"direction_weight"):
         TrainPPOConfig(imitation=ImitationConfig(direction_weight=-1.0)).check()
-    TrainPPOConfig(method="staf", policy=PolicyConfig(drive_input=True)).check()
+    TrainPPOConfig(method="staf_planned", policy=PolicyConfig(drive_input=True)).check()
     for gap in (-0.01, 0.35):  # below zero, or where the cap starts braking: never moves
         with pytest.raises(StafpipeError, match=r"train_ppo.imitation.stop_gap"):
             TrainPPOConfig(imitation=ImitationConfig(stop_gap=gap)).check()

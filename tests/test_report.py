@@ -67,13 +67,13 @@ def _episodes(method, formation, sr, n=10, episodes=5):
 
 
 def test_a_claim_is_judged_from_the_runs_that_match_it_and_flips_with_its_number(tmp_path) -> None:
-    claim = next(c for c in staf_claims() if c.statement == "STAF success rate, wedge")
-    good = _eval_run(tmp_path, "good", _episodes("staf", "wedge", 1.0))
-    other = _eval_run(tmp_path, "other", _episodes("staf", "line", 0.0))  # another cell: must not count
-    faulty = _eval_run(tmp_path, "faulty", _episodes("staf", "wedge", 0.0), [{"kind": "stuck", "robot": 3}])
+    claim = next(c for c in staf_claims() if c.statement == "STAF-planned (ours) success rate, wedge")
+    good = _eval_run(tmp_path, "good", _episodes("staf_planned", "wedge", 1.0))
+    other = _eval_run(tmp_path, "other", _episodes("staf_planned", "line", 0.0))  # another cell: must not count
+    faulty = _eval_run(tmp_path, "faulty", _episodes("staf_planned", "wedge", 0.0), [{"kind": "stuck", "robot": 3}])
     [row] = judge_all(gather(list(map(type(tmp_path), [good, other, faulty]))), [claim])
     assert row.verdict == HOLDS and row.measured.ours.value == 100.0 and row.measured.ours.n == 5
-    _eval_run(tmp_path, "bad", _episodes("staf", "wedge", 0.9))
+    _eval_run(tmp_path, "bad", _episodes("staf_planned", "wedge", 0.9))
     [row] = judge_all(gather([tmp_path / "bad"]), [claim])
     assert row.verdict == PARTLY and row.measured.ours.value == pytest.approx(90.0)
     [row] = judge_all(gather([tmp_path / "other"]), [claim])

@@ -288,7 +288,7 @@ def test_subteam_metrics_and_staf_table() -> None:
     assert out["sub1_tt"] == 2.0 and out["sub2_tt"] == 3.0
     rows = [
         {
-            "method": "staf",
+            "method": "staf_planned",
             "formation": "circle",
             "n": 10,
             "drive": "holonomic",
@@ -316,17 +316,17 @@ def test_subteam_metrics_and_staf_table() -> None:
     # the paper's STAF circle numbers beside our corridor row, not beside the narrower corridor's (eta 1.80)
     assert text.count("[87.8]") == 1 and "[102.1]" in text
     assert "| 1.80 |" in text
-    assert subteam_tables(pd.DataFrame(rows)).loc[0, "method"] == "staf-sub1"
+    assert subteam_tables(pd.DataFrame(rows)).loc[0, "method"] == "staf_planned-sub1"
 
 
 def test_shipped_staf_passes_the_corridor_and_logs_split_and_regroup(workdir) -> None:
-    """The shipped policy end to end (method=staf through eval): every robot at its goal slot without a collision,
-    the team split into subteams and regrouped, and the MCAP log says so."""
+    """The shipped policy end to end (method=staf_planned through eval): every robot at its goal slot without a
+    collision, the team split into subteams and regrouped, and the MCAP log says so."""
     from conftest import job_dirs
     from stafpipe.episode_log import read_episode
     from stafpipe.launch import launch
 
-    assert launch("eval", ["method=staf", "formation=circle", "eval.episodes=1", "seed=3"]) == 0
+    assert launch("eval", ["method=staf_planned", "formation=circle", "eval.episodes=1", "seed=3"]) == 0
     run = job_dirs(workdir)[0]
     row = pd.read_parquet(run / "results.parquet").iloc[0]
     assert row["sr"] == 1.0 and row["collisions"] == 0 and row["subteams_max"] == 2  # the paper's two subteams
@@ -340,7 +340,7 @@ def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir)
     from conftest import job_dirs
     from stafpipe.launch import launch
 
-    for method in ("staf", "lf"):
+    for method in ("staf_planned", "lf"):
         d = workdir / method
         d.mkdir()
         pd.DataFrame(
@@ -366,18 +366,20 @@ def test_plot_table_writes_tables_and_figure_and_refuses_a_non_eval_dir(workdir)
             ]
             * 2
         ).to_parquet(d / "results.parquet")
-    # staf's run is on the paper's map, lf's on the corridor made 10 m long: no paper numbers beside it
+    # staf_planned's run is on the paper's map, lf's on the corridor made 10 m long: no paper numbers beside it
     walls = OmegaConf.to_container(OmegaConf.load(conf_dir() / "scenario" / "corridor.yaml"))
-    OmegaConf.save({"scenario": walls}, workdir / "staf" / "config.yaml")
+    OmegaConf.save({"scenario": walls}, workdir / "staf_planned" / "config.yaml")
     walls["obstacles"][0]["box"]["size"][0] = 10.0
     OmegaConf.save({"scenario": walls}, workdir / "lf" / "config.yaml")
     (workdir / "empty").mkdir()
-    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'empty'}]"]) == 2
+    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf_planned'},{workdir / 'empty'}]"]) == 2
     assert not job_dirs(workdir)
-    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf'},{workdir / 'lf'}]"]) == 0
+    assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{workdir / 'staf_planned'},{workdir / 'lf'}]"]) == 0
     out = job_dirs(workdir)[0]
     text = (out / "table.md").read_text()
-    assert "[91.5]" in text and "[30.1]" not in text and "staf-sub1" in text  # STAF line CFI; not L&F's; Table 2
+    assert (
+        "[91.5]" in text and "[30.1]" not in text and "STAF-planned (ours)-sub1" in text
+    )  # STAF line CFI; not L&F's; Table 2
     assert (out / "cfi_vs_sigma.png").is_file() and len(pd.read_csv(out / "table.csv")) == 2
 
 

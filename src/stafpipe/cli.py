@@ -28,11 +28,11 @@ EXAMPLES = {
     "train-high": ["stafpipe train-high experiment=smoke", "stafpipe train-high seed=2 'data.mix=[wedge,line]'"],
     "train-ppo": [
         "stafpipe train-ppo train_ppo.method=dgnn train_ppo.iterations=50",
-        "stafpipe train-ppo experiment=staf_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'",
+        "stafpipe train-ppo experiment=staf_planned_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'",
     ],
     "eval": [
-        "stafpipe eval method=staf scenario=bridge formation=wedge eval.episodes=20",
-        "stafpipe eval -m hydra/launcher=local method=staf,dgnn,lf scenario=corridor",
+        "stafpipe eval method=staf_planned scenario=bridge formation=wedge eval.episodes=20",
+        "stafpipe eval -m hydra/launcher=local method=staf_planned,dgnn,lf scenario=corridor",
     ],
     "ablate": ["stafpipe ablate ablate.study=subteam_count", "stafpipe ablate ablate.study=noise seed=2"],
     "plot": [
@@ -208,7 +208,9 @@ def inspect(
 @app.command()
 def export(
     network: str = typer.Argument(
-        ..., help="staf (STAF's GNN + low level), dgnn (the DGNN policy) or high (STAF's deep graph cut)."
+        ...,
+        help="staf_planned (the GNN + low level of STAF-planned, ours), dgnn (the DGNN policy) or high (STAF's "
+        "deep graph cut).",
     ),
     checkpoint: str = typer.Option(
         "", "--checkpoint", help="A policy.pt / high-level checkpoint; empty: the shipped one."
@@ -218,7 +220,7 @@ def export(
         None,
         "--ensemble",
         help="Another training run of the policy to average in (repeat it; as method.ensemble); not given: the "
-        "shipped partner run with the shipped staf checkpoint, none with any other; --no-ensemble: none.",
+        "shipped partner run with the shipped staf_planned checkpoint, none with any other; --no-ensemble: none.",
     ),
     no_ensemble: bool = typer.Option(False, "--no-ensemble", help="The checkpoint alone, without partner runs."),
 ) -> None:

@@ -3,11 +3,11 @@
 - `BatchedTeamEnv`: B worlds stepped together, arrays (B, n, ...) in and out: the fast form, as our trainer uses.
 - `TeamParallelEnv`: a PettingZoo `ParallelEnv` (one world, agents `robot_0` ... `robot_{n-1}`) over the batched form.
 
-Both give exactly what `stafpipe train-ppo` trains on: the learned method's features (`method`: `dgnn` or `staf`,
-its adapter in learning/adapters.py, so STAF's plan sets the targets), its per-robot reward (`rollout.step_reward`:
-progress, arrival bonus, contacts, the method's own terms) and its episodes: a fixed length of `episode_steps`, cut
-by truncation, never terminated early. An action is a robot-frame velocity in units of top speed, clipped to [-1, 1].
-At the end of an episode the info carries the trainer's metrics (`rollout.episode_stats`).
+Both give exactly what `stafpipe train-ppo` trains on: the learned method's features (`method`: `dgnn` or
+`staf_planned`, its adapter in learning/adapters.py, so STAF-planned's plan sets the targets), its per-robot reward
+(`rollout.step_reward`: progress, arrival bonus, contacts, the method's own terms) and its episodes: a fixed length of
+`episode_steps`, cut by truncation, never terminated early. An action is a robot-frame velocity in units of top speed,
+clipped to [-1, 1]. At the end of an episode the info carries the trainer's metrics (`rollout.episode_stats`).
 """
 
 from __future__ import annotations

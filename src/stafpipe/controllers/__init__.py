@@ -17,7 +17,7 @@ METHODS: dict[str, tuple[str, str]] = {
     ),
     "zhu": ("stafpipe.controllers.zhu_config:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
-    "staf": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),
+    "staf_planned": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),
 }
 
 __all__ = ["METHODS", "Controller", "Event", "TeamInfo", "make_controller", "method_config_class"]

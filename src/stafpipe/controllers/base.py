@@ -1,4 +1,4 @@
-"""The one controller interface every method implements (straight, lf, zhu, cezayirli, dgnn, staf).
+"""The one controller interface every method implements (straight, lf, zhu, cezayirli, dgnn, staf_planned).
 
 Evaluation, metrics and logging never special-case a method: they call `reset_worlds` with one team per world of a
 batch, then `act_worlds` once per control step on the batch's (B, n, ...) observations, and read each world's

@@ -16,7 +16,7 @@ this of it), and how far along the path from the robot's own place a target out 
 
 @dataclass
 class PlanConfig:
-    """Execution settings of STAF's plan (part of `method=staf` and of `train_ppo.staf`)."""
+    """Execution settings of STAF's plan (part of `method=staf_planned` and of `train_ppo.plan`)."""
 
     m: str = "2"
     """Subteams: a fixed number (2: STAF Table 1, Table 2 and Fig. 4 divide every team into two) or `auto` (our

@@ -1,9 +1,9 @@
-"""`method=staf`: the full STAF hierarchy (STAF, App. B.2 execution). The plan
-(controllers/staf_plan.py: deep graph cut when a passage ahead is too narrow, subteams in the team's formation type
-passing one after another, regroup into the original formation) gives every robot its target; the trained
-intermediate GNN + low-level policy (learning/staf_net.py, `stafpipe train-ppo train_ppo.method=staf`) drives it there,
-adapting the formation to the passage and keeping clear of robots and walls. Driven through
-`learning/adapters.py:StafAdapter`, as in training."""
+"""`method=staf_planned`: STAF-planned, ours, not the paper's method: the STAF hierarchy (STAF, App. B.2 execution)
+driven by a hand-written plan. The plan (controllers/staf_plan.py: deep graph cut when a passage ahead is too narrow,
+subteams in the team's formation type passing one after another, regroup into the original formation) gives every
+robot its target; the trained intermediate GNN + low-level policy (learning/staf_net.py, `stafpipe train-ppo
+train_ppo.method=staf_planned`) drives it there, adapting the formation to the passage and keeping clear of robots and
+walls. Driven through `learning/adapters.py:StafAdapter`, as in training."""
 
 from __future__ import annotations
 
@@ -16,11 +16,11 @@ from stafpipe.controllers.plan_config import PlanConfig
 
 @dataclass
 class StafMethodConfig:
-    """Config of `method=staf` (group `method`)."""
+    """Config of `method=staf_planned` (group `method`)."""
 
-    name: str = "staf"
+    name: str = "staf_planned"
     checkpoint: str = ""
-    """A `policy.pt` of `stafpipe train-ppo train_ppo.method=staf`; empty: the one shipped with the package;
+    """A `policy.pt` of `stafpipe train-ppo train_ppo.method=staf_planned`; empty: the one shipped with the package;
     `shipped:NAME`: NAME.pt shipped with it."""
     deterministic: bool = True
     """Act with the policy's mean (as evaluated); false samples from it."""
@@ -30,11 +30,11 @@ class StafMethodConfig:
     """Run a checkpoint whose recorded training settings (plan, sensing radius) differ from this run's, with a
     warning naming each differing key; false refuses it (learned/controllers: checkpoint_mismatch)."""
     ensemble: list[str] | None = None
-    """More `policy.pt` files of the same network (other training runs, e.g. other seeds): each robot acts with the
-    mean of their action means and the checkpoint's. Unset (default): with the shipped checkpoint (`checkpoint`
-    empty) the shipped pair, `staf.pt` + `staf_seed1.pt`; with any other checkpoint, that checkpoint alone. `[]`:
-    the checkpoint alone (`checkpoint=shipped:staf ensemble=[]` is the shipped first run by itself). Each member is
-    checked as the checkpoint is (settings, `allow_mismatch`)."""
+    """More `policy.pt` files of the same network (other training runs, e.g. other seeds): each robot acts with the mean
+    of their action means and the checkpoint's. Unset (default): with the shipped checkpoint (`checkpoint` empty) the
+    shipped pair, `staf_planned.pt` + `staf_planned_seed1.pt`; with any other checkpoint, that checkpoint alone. `[]`:
+    the checkpoint alone (`checkpoint=shipped:staf_planned ensemble=[]` is the shipped first run by itself). Each member
+    is checked as the checkpoint is (settings, `allow_mismatch`)."""
     low_level: str = "learned"
     """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf.md,
     `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed),

@@ -137,7 +137,7 @@ class StafAdapter(Adapter):
     controllers/staf_plan.py) gives each robot its target; the network sees the robot-frame states of
     `features.staf_features`; the reward adds R^adp and the proximity penalty (`staf_penalties`)."""
 
-    name = "staf"
+    name = "staf_planned"
     network = StafPolicy
     plan_cfg: PlanConfig  # always set here (the default plan when none is given)
 

@@ -27,10 +27,10 @@ class PolicyCheckpointError(StafpipeError):
 
 
 SHIPPED = "shipped:"
-"""`shipped:NAME` names the checkpoint NAME.pt shipped with the package (e.g. `shipped:staf_seed1`)."""
+"""`shipped:NAME` names the checkpoint NAME.pt shipped with the package (e.g. `shipped:staf_planned_seed1`)."""
 
 
-SHIPPED_PARTNERS: dict[str, tuple[str, ...]] = {"staf": ("shipped:staf_seed1",)}
+SHIPPED_PARTNERS: dict[str, tuple[str, ...]] = {"staf_planned": ("shipped:staf_planned_seed1",)}
 """The shipped policy of a method acts with these other training runs of its network averaged in (`method.ensemble`
 left unset and `method.checkpoint` empty): STAF's two runs (how much better than one: docs/staf.md, "The pair as
 the default")."""

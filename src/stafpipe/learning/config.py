@@ -26,13 +26,13 @@ class RewardConfig:
     contact_tolerance: float = 0.02
     """Surfaces closer than this (m) count as touching."""
     formation: float = 0.1
-    """method=staf: weight of STAF's spring-damper term R^adp (Sec. 3) in the per-robot reward (0 for dgnn: DGNN has
-    no formation term)."""
+    """method=staf_planned: weight of STAF's spring-damper term R^adp (Sec. 3) in the per-robot reward (0 for dgnn: DGNN
+    has no formation term)."""
     adp_lambda: float = 0.6
     """lambda of R^adp = sum -lambda |d_ij - p_ij| - (1 - lambda) q_ij (STAF Sec. 3; 0.6 in App. C)."""
     proximity: float = 0.1
-    """method=staf: penalty per neighbour or obstacle closer than `safe_distance`, growing linearly to this at contact
-    (STAF Sec. 3: "a penalty when a robot comes too close to nearby obstacles or other robots")."""
+    """method=staf_planned: penalty per neighbour or obstacle closer than `safe_distance`, growing linearly to this at
+    contact (STAF Sec. 3: "a penalty when a robot comes too close to nearby obstacles or other robots")."""
     safe_distance: float = 0.15
     """Surface gap (m) below which the proximity penalty starts."""
 
@@ -56,13 +56,13 @@ class PolicyConfig:
     """guide=path: within this distance of the path's end the target becomes the robot's own goal (m)."""
     init_log_std: float = -0.5
     prior_gain: float = 0.0
-    """method=staf: 0 = a_i = psi(f_i) as printed; > 0 adds a proportional step towards the target (gain x target
-    vector, at most unit length) to psi's output, which then learns a residual (docs/staf.md)."""
+    """method=staf_planned: 0 = a_i = psi(f_i) as printed; > 0 adds a proportional step towards the target (gain x
+    target vector, at most unit length) to psi's output, which then learns a residual (docs/staf.md)."""
     message: str = "relu"
-    """method=staf: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu`
+    """method=staf_planned: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu`
     (learning/staf_net.py)."""
     drive_input: bool = False
-    """method=staf: true appends to each robot's own state a flag of its drive (1 a differential drive, 0
+    """method=staf_planned: true appends to each robot's own state a flag of its drive (1 a differential drive, 0
     holonomic; a robot knows its own drive), so that one network can act differently on each where their states look
     the same (the `sliding` teacher's differential-drive cap, docs/staf.md); false: the state as printed (Sec. 3)."""
 
@@ -109,7 +109,7 @@ class ImitationConfig:
     """The same with each robot's nearest sensed neighbour moved, in that robot's view, to a random bearing 0-0.4 m
     from its surface (`teachers.near_neighbour_copy`); 0: none."""
     privileged: bool = False
-    """method=staf with `plan.adapt=nominal`: true, the teacher drives to the targets of a shadow plan with the
+    """method=staf_planned with `plan.adapt=nominal`: true, the teacher drives to the targets of a shadow plan with the
     geometric adaptation, which the network never sees (it must infer the shrink from what it senses; measured
     worse, docs/staf.md "Learned adaptation"); false, the teacher drives to the plan's own nominal targets, as the
     network sees them, and deforms the formation only by braking for walls and robots."""
@@ -124,8 +124,9 @@ class TrainPPOConfig:
     `episode_steps` steps in each, so an iteration boundary is an exact resume point."""
 
     method: str = "dgnn"
-    """The learned method to train (its adapter, learning/adapters.py): `dgnn` (the baseline) or `staf` (STAF's
-    intermediate + low level, on the targets of STAF's plan with the high level fixed: one round of App. B.1)."""
+    """The learned method to train (its adapter, learning/adapters.py): `dgnn` (the baseline) or `staf_planned`
+    (STAF-planned, ours: STAF's intermediate + low level, on the targets of our plan with the high level fixed: one
+    round of App. B.1)."""
     iterations: int = 100
     """Training iterations (about 10 min on 2 cores with the defaults; DGNN solves the corridor in about 60)."""
     worlds: int = 16
@@ -178,8 +179,8 @@ class TrainPPOConfig:
     policy: PolicyConfig = field(default_factory=PolicyConfig)
     imitation: ImitationConfig = field(default_factory=ImitationConfig)
     plan: PlanConfig = field(default_factory=PlanConfig)
-    """method=staf: the execution plan (subteams, sequencing, regroup) the policy is trained on; `method=staf` must
-    use the same settings."""
+    """method=staf_planned: the execution plan (subteams, sequencing, regroup) the policy is trained on; an eval of
+    `method=staf_planned` must use the same settings."""
 
     def check(self, key: str = "train_ppo") -> None:
         from stafpipe.learning.adapters import ADAPTERS
@@ -211,9 +212,9 @@ class TrainPPOConfig:
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
         require(
-            not self.policy.drive_input or self.method == "staf",
+            not self.policy.drive_input or self.method == "staf_planned",
             f"{key}.policy.drive_input",
-            "is read by method=staf only",
+            "is read by method=staf_planned only",
             self.method,
         )
         from stafpipe.devices import check_device

@@ -1,5 +1,6 @@
-"""Hand-made low levels: the imitation teachers of the warm start (learning/ppo.py:imitate) and, in `method=staf`
-(`method.low_level`), the method with its learned low level removed, for the ablation of docs/staf.md.
+"""Hand-made low levels: the imitation teachers of the warm start (learning/ppo.py:imitate) and, in
+`method=staf_planned` (`method.low_level`), the method with its learned low level removed, for the ablation of
+docs/staf.md.
 
 - `proportional`: a step towards the target at min(1, gain x distance) of top speed (the step of the residual prior,
   staf_net.proportional_step).

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from stafpipe.plots.staf_tables import method_label
+
 
 def levels_figure(table: pd.DataFrame):
     """Three panels (SR %, collisions / episode, CFI 0.5 %) of a `staf_tables.summary_table` with a `label` column."""
@@ -15,7 +17,7 @@ def levels_figure(table: pd.DataFrame):
     table = table.assign(
         where=table["scenario"].astype(str)
         + np.where(table["scenario"].astype(str).str.startswith("corridor"), " " + table["formation"].astype(str), ""),
-        variant=table["method"].astype(str) + np.where(label.str.len() > 0, " (" + label + ")", ""),
+        variant=table["method"].astype(str).map(method_label) + np.where(label.str.len() > 0, " (" + label + ")", ""),
     )
     table = table.drop_duplicates(["variant", "where"])  # one bar per variant and map (the first run of a repeat)
     places = list(dict.fromkeys(table["where"]))

@@ -29,6 +29,12 @@ PAPER_TABLE1: dict[tuple[str, str], tuple[float, float, float, float, float]] = 
     ("staf", "wedge"): (100.00, 69.30, 80.52, 80.51, 80.50),
     ("staf", "line"): (100.00, 111.50, 91.45, 80.06, 78.93),
 }
+"""Keyed by the paper's methods: ("staf", ...) is the paper's STAF, the numbers a `method=staf` row stands beside."""
+PAPER_METHOD = {"staf_planned": "staf"}
+"""Our methods compared with another paper method's numbers: STAF-planned (ours, the plan + learned low level)
+against the paper's STAF. A method not named here is compared with its own (dgnn, lf, staf)."""
+LABELS = {"staf_planned": "STAF-planned (ours)"}
+"""How a method's rows are named in the tables and figures (others: the method's name)."""
 METRICS = (
     "sr",
     "tt",
@@ -40,6 +46,17 @@ METRICS = (
     "collisions",
 )
 GROUP = ["run", "method", "label", "formation", "n", "drive", "scenario", "paper_cell"]
+
+
+def paper_key(method: str, formation: str) -> tuple[str, str]:
+    """The key of the paper's Table 1 cell that `method`'s row of `formation` is compared with (`PAPER_METHOD`)."""
+    return PAPER_METHOD.get(method, method), formation
+
+
+def method_label(method: str) -> str:
+    """A method's name in a table or figure: `LABELS`, a subteam's suffix (`-sub1`, Table 2) kept."""
+    base, sep, sub = method.partition("-sub")
+    return LABELS.get(base, base) + sep + sub
 
 
 def mean_ci(values: pd.Series) -> tuple[float, float]:
@@ -106,7 +123,7 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
         label = r.get("label", "")
         labelled = isinstance(label, str) and bool(label)  # a variant of ours (e.g. m-auto): not the paper's setup
         papers_cell = r.get("n") == 10 and bool(r.get("paper_cell", False)) and not labelled  # the paper's map, team
-        ref = PAPER_TABLE1.get((r["method"], r["formation"])) if paper and papers_cell else None
+        ref = PAPER_TABLE1.get(paper_key(str(r["method"]), str(r["formation"]))) if paper and papers_cell else None
         cells = [
             _cell(r.get("sr", math.nan), r.get("sr_ci95", math.nan), 100),
             _cell(r.get("tt", math.nan), r.get("tt_ci95", math.nan)),
@@ -124,7 +141,8 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
             _cell(r.get("collisions", math.nan), r.get("collisions_ci95", math.nan), 1, 2),
             f"{100 * r['all_succeeded']:.0f} %",
         ]
-        method = f"{r['method']} ({label})" if labelled else str(r["method"])
+        name = method_label(str(r["method"]))
+        method = f"{name} ({label})" if labelled else name
         lines.append(
             "| "
             + " | ".join(
@@ -142,7 +160,11 @@ def markdown(table: pd.DataFrame, title: str, paper: bool = True) -> str:
             + " |"
         )
     if paper:
-        lines += ["", "[brackets]: STAF Table 1 (Gazebo, 10 trials per cell). Ours: mean ± 95 % CI over the episodes."]
+        lines += [
+            "",
+            "[brackets]: STAF Table 1 (Gazebo, 10 trials per cell; beside STAF-planned (ours), the paper's STAF). Ours:"
+            " mean ± 95 % CI over the episodes.",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -174,7 +196,7 @@ def cfi_sigma_figure(table: pd.DataFrame):
             yerr=np.nan_to_num(cis),
             marker="o",
             capsize=3,
-            label=f"{r['method']} {r['formation']} n={r.get('n', '?')}",
+            label=f"{method_label(str(r['method']))} {r['formation']} n={r.get('n', '?')}",
         )
     ax.set_xscale("log")
     ax.set_xlabel("sigma (m)")

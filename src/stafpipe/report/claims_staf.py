@@ -1,5 +1,7 @@
-"""STAF's tables, figures and claims (STAF Sec. 4-5, App. F) as report rows. Paper numbers: Table 1 from
-`plots.staf_tables.PAPER_TABLE1`; the others quoted from the paper's text, cited in each row."""
+"""STAF's tables, figures and claims (STAF Sec. 4-5, App. F) as report rows, answered by the runs of STAF-planned
+(ours, `method=staf_planned`: our plan + the learned low level). Paper numbers: Table 1 from
+`plots.staf_tables.PAPER_TABLE1` (STAF-planned's cells beside the paper's STAF: `paper_key`); the others quoted
+from the paper's text, cited in each row."""
 
 from __future__ import annotations
 
@@ -10,13 +12,16 @@ from typing import Any
 import pandas as pd
 
 from stafpipe.metrics import CFI_SIGMAS
-from stafpipe.plots.staf_tables import PAPER_TABLE1
+from stafpipe.plots.staf_tables import LABELS, PAPER_TABLE1, paper_key
 from stafpipe.report.claims import Claim, Measured, fraction
 from stafpipe.report.evidence import Evidence, column_number, lowest
 from stafpipe.report.verdicts import HOLDS, Criterion, Number
 
 FORMATIONS = ("circle", "wedge", "line")
-NAMES = {"staf": "STAF", "dgnn": "DGNN", "lf": "L&F"}
+PLANNED = "staf_planned"
+"""The method whose runs answer STAF's claims: STAF-planned (ours), against the paper's STAF numbers."""
+NAMES = {PLANNED: LABELS[PLANNED], "dgnn": "DGNN", "lf": "L&F"}
+OURS = NAMES[PLANNED]
 
 
 def cell(method: str, formation: str) -> dict[str, Any]:
@@ -42,8 +47,8 @@ def _mean(column: str, where: dict[str, Any], criterion: Criterion, note: str = 
 def _table1_claims() -> list[Claim]:
     claims = []
     for f in FORMATIONS:
-        for method in ("staf", "dgnn"):
-            sr = PAPER_TABLE1[(method, f)][0]
+        for method in (PLANNED, "dgnn"):
+            sr = PAPER_TABLE1[paper_key(method, f)][0]
             claims.append(
                 Claim(
                     "STAF",
@@ -65,9 +70,9 @@ def _table1_claims() -> list[Claim]:
                 _mean("sr", cell("lf", f), Criterion("near", lf_sr, 15)),
             )
         )
-        cfi = PAPER_TABLE1[("staf", f)][2]
+        cfi = PAPER_TABLE1[paper_key(PLANNED, f)][2]
         claims.append(
-            Claim("STAF", "Table 1", f"STAF CFI (sigma 0.5), {f}", f"{cfi:.2f} %", "staf_table1", _staf_cfi(f, cfi))
+            Claim("STAF", "Table 1", f"{OURS} CFI (sigma 0.5), {f}", f"{cfi:.2f} %", "staf_table1", _staf_cfi(f, cfi))
         )
         lf_cfi, dgnn_cfi = PAPER_TABLE1[("lf", f)][2], PAPER_TABLE1[("dgnn", f)][2]
         claims.append(
@@ -84,7 +89,7 @@ def _table1_claims() -> list[Claim]:
         Claim(
             "STAF",
             "Table 1",
-            "STAF's CFI is above DGNN's and L&F's at every sigma and formation",
+            f"the CFI of {OURS} is above DGNN's and L&F's at every sigma and formation",
             "9 of 9 cells",
             "staf_table1",
             _staf_cfi_above_both,
@@ -92,7 +97,7 @@ def _table1_claims() -> list[Claim]:
         Claim(
             "STAF",
             "Table 1",
-            "L&F is the fastest method (its TT below STAF's and DGNN's)",
+            f"L&F is the fastest method (its TT below those of {OURS} and DGNN)",
             "3 of 3 formations (27.4 / 26.5 / 30.1 s)",
             "staf_table1",
             _lf_fastest,
@@ -111,9 +116,9 @@ def _table1_claims() -> list[Claim]:
 
 def _staf_cfi(formation: str, paper: float) -> Callable[[Evidence], Measured]:
     return lambda ev: Measured(
-        ev.number("cfi_0.5", 100, " %", **cell("staf", formation)),
+        ev.number("cfi_0.5", 100, " %", **cell(PLANNED, formation)),
         Criterion("at_least", paper - 5, 10),
-        _cfi_note(ev, "staf", formation),
+        _cfi_note(ev, PLANNED, formation),
     )
 
 
@@ -137,12 +142,12 @@ def _staf_cfi_above_both(ev: Evidence) -> Measured:
     for f in FORMATIONS:
         for s in CFI_SIGMAS:
             col = f"cfi_{s:g}"
-            staf = ev.number(col, **cell("staf", f))
+            ours = ev.number(col, **cell(PLANNED, f))
             others = [ev.number(col, **cell(m, f)) for m in ("dgnn", "lf")]
-            if any(math.isnan(x.value) for x in (staf, *others)):
+            if any(math.isnan(x.value) for x in (ours, *others)):
                 continue
             total += 1
-            hits += all(Criterion("above", o.value, target_ci=o.half).verdict(staf) == HOLDS for o in others)
+            hits += all(Criterion("above", o.value, target_ci=o.half).verdict(ours) == HOLDS for o in others)
     return Measured(
         Number(hits if total else math.nan, 0, total), Criterion("at_least", 9, 3), "cells above both outside the CIs"
     )
@@ -152,7 +157,7 @@ def _lf_fastest(ev: Evidence) -> Measured:
     hits, total = 0, 0
     for f in FORMATIONS:
         lf = ev.number("tt_arrived", **cell("lf", f))
-        rivals = [ev.number("tt", **cell(m, f)) for m in ("staf", "dgnn")]
+        rivals = [ev.number("tt", **cell(m, f)) for m in (PLANNED, "dgnn")]
         if math.isnan(lf.value) or all(math.isnan(r.value) for r in rivals):
             continue
         total += 1
@@ -169,7 +174,7 @@ def _table2_and_fig4() -> list[Claim]:
     for f in FORMATIONS:
 
         def both(ev: Evidence, f: str = f) -> Measured:
-            rows = ev.select(**cell("staf", f))
+            rows = ev.select(**cell(PLANNED, f))
             if rows.empty or "sub2_sr" not in rows:
                 return Measured(Number(math.nan), Criterion("at_least", 95, 10))
             subs = [column_number(rows, c, 100, " %") for c in ("sub1_sr", "sub2_sr")]
@@ -180,7 +185,7 @@ def _table2_and_fig4() -> list[Claim]:
         claims.append(Claim("STAF", "Table 2", f"both subteams succeed, {f}", "100 % each", "staf_table1", both))
 
     def two_subteams(ev: Evidence) -> Measured:
-        rows = pd.concat([ev.select(**cell("staf", f)) for f in FORMATIONS])
+        rows = pd.concat([ev.select(**cell(PLANNED, f)) for f in FORMATIONS])
         hits = int((rows["subteams_max"] == 2).sum()) if not rows.empty else 0
         return Measured(fraction(hits, len(rows)), Criterion("at_least", 100, 10), "episodes with exactly two subteams")
 
@@ -254,7 +259,7 @@ def _fig7_claims() -> list[Claim]:
 
 def _team_size_claims() -> list[Claim]:
     def circle(n: int) -> dict[str, Any]:
-        return {**cell("staf", "circle"), "n": n}
+        return {**cell(PLANNED, "circle"), "n": n}
 
     def all_sizes(ev: Evidence) -> Measured:
         worst = lowest([ev.number("sr", 100, " %", **circle(n)) for n in (4, 6, 7, 8)])
@@ -329,7 +334,7 @@ def _levels(ev: Evidence) -> dict[str, dict[str, pd.DataFrame]]:
     if rows.empty or "label" not in rows:
         return {}
     variant = rows["label"].str.split("-").str[0]  # staf_levels labels its variants "a-no-learning", "b-...", ...
-    rows = rows.assign(variant=variant)[(rows["method"] == "staf") & variant.isin(["a", "b"]) & (rows["faults"] == "")]
+    rows = rows.assign(variant=variant)[(rows["method"] == PLANNED) & variant.isin(["a", "b"]) & (rows["faults"] == "")]
     out: dict[str, dict[str, pd.DataFrame]] = {}
     for (scenario, formation, label), g in rows.groupby(["scenario", "formation", "variant"]):
         out.setdefault(f"{scenario} {formation}", {})[str(label)] = g
@@ -368,7 +373,7 @@ def _learning_claims() -> list[Claim]:
         if rows.empty:
             return Measured(Number(math.nan), Criterion("at_least", 95, 10))
         rows = rows[
-            (rows["method"] == "staf") & rows["label"].str.startswith("b-") & rows["scenario"].str.startswith("gen")
+            (rows["method"] == PLANNED) & rows["label"].str.startswith("b-") & rows["scenario"].str.startswith("gen")
         ]
         srs = [column_number(g, "sr", 100, " %") for _, g in rows.groupby("scenario")]
         return Measured(lowest(srs), Criterion("at_least", 95, 10), f"the lowest of {len(srs)} generated maps")
@@ -393,7 +398,7 @@ def _learning_claims() -> list[Claim]:
         Claim(
             "STAF",
             "Generalisation (ours)",
-            "STAF succeeds on generated maps it was not trained on (holonomic and differential drive)",
+            f"{OURS} succeeds on generated maps it was not trained on (holonomic and differential drive)",
             "-",
             "staf_levels",
             generated,
@@ -403,14 +408,14 @@ def _learning_claims() -> list[Claim]:
 
 def _platform_claims() -> list[Claim]:
     def diff(ev: Evidence) -> Measured:
-        worst = lowest([ev.number("sr", 100, " %", **{**cell("staf", f), "drive": "diff_drive"}) for f in FORMATIONS])
+        worst = lowest([ev.number("sr", 100, " %", **{**cell(PLANNED, f), "drive": "diff_drive"}) for f in FORMATIONS])
         return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR of circle, wedge, line")
 
     def builtin(ev: Evidence) -> Measured:
         rows = ev.episodes
         if rows.empty:
             return Measured(Number(math.nan), Criterion("at_least", 95, 10))
-        rows = rows[(rows["method"] == "staf") & (rows["faults"] == "") & (rows["drive"] == "holonomic")]
+        rows = rows[(rows["method"] == PLANNED) & (rows["faults"] == "") & (rows["drive"] == "holonomic")]
         plain = rows["label"].isin(["", "gap-2m", "gap-3m", "long-10m"]) | rows["label"].str.startswith("b-")
         rows = rows[plain & ~rows["scenario"].str.startswith("gen")]
         rows = rows[(rows["scenario"] != "corridor") | rows["label"].isin(["gap-2m", "gap-3m", "long-10m"])]
@@ -428,7 +433,7 @@ def _platform_claims() -> list[Claim]:
         Claim(
             "STAF",
             "App. F, platforms",
-            "STAF on differential-drive robots (Warthog, Limo) passes the corridor",
+            f"{OURS} on differential-drive robots (Warthog, Limo) passes the corridor",
             "qualitative (Fig. 5, 11-13)",
             "staf_platforms",
             diff,
@@ -436,7 +441,7 @@ def _platform_claims() -> list[Claim]:
         Claim(
             "STAF",
             "Generalisation (ours)",
-            "STAF passes every built-in map (doorway, bridge, narrowing, several "
+            f"{OURS} passes every built-in map (doorway, bridge, narrowing, several "
             "passages, bollards, forest, corridor 2 m / 3 m / 10 m long)",
             "-",
             "staf_generalisation",
@@ -445,13 +450,13 @@ def _platform_claims() -> list[Claim]:
         Claim(
             "STAF",
             "App. F, platforms",
-            "DGNN on differential-drive robots is below STAF (line formation SR)",
+            f"DGNN on differential-drive robots is below {OURS} (line formation SR)",
             "-",
             "staf_platforms",
             lambda ev: _above(
                 ev,
                 "sr",
-                {**cell("staf", "line"), "drive": "diff_drive"},
+                {**cell(PLANNED, "line"), "drive": "diff_drive"},
                 {**cell("dgnn", "line"), "drive": "diff_drive"},
                 "DGNN",
             ),
