@@ -1,4 +1,5 @@
-"""Decision time of STAF for one control step (plan + deep graph cut when it splits + intermediate GNN + policy).
+"""Decision time of STAF for one control step (plan or rules + deep graph cut when it splits + GNN + policy), for
+STAF-planned (`method=staf_planned`) and the paper's STAF (`method=staf`, its 10-robot rows).
 
 Usage: python benchmarks/staf_decision_time.py [--repeats 30] [--episodes 40] [--maps corridor doorway ...]
        [--ensemble B.pt C.pt]  (the 10-robot rows with `method.ensemble`: one forward pass more per member;
@@ -35,13 +36,22 @@ from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 
-def ten_robots(episodes: int, name: str = "corridor", ensemble: list[str] | None = None) -> tuple[float, float, float]:
+def ten_robots(
+    episodes: int, name: str = "corridor", ensemble: list[str] | None = None, method: str = "staf_planned"
+) -> tuple[float, float, float]:
     """(median ms per step, 99th percentile ms per step, median ms of the split step) over episodes on map `name`:
-    one split step per episode, so several episodes keep a single slow sample from deciding it."""
+    one split step per episode, so several episodes keep a single slow sample from deciding it. `method`: staf_planned
+    (its plan) or staf (the paper's rules, methods/staf)."""
     sc = load_named_scenario(name)
     geometry = Geometry(sc)
     ctx, path = episode_context(sc, geometry, SensingConfig(), 0.3, 0.1)
-    ctrl = StafController(StafMethodConfig(ensemble=ensemble))
+    if method == "staf":
+        from stafpipe.controllers import make_controller
+        from stafpipe.methods.staf.method import StafConfig
+
+        ctrl = make_controller(StafConfig(ensemble=ensemble))
+    else:
+        ctrl = StafController(StafMethodConfig(ensemble=ensemble))
     worlds = Worlds([sc], SensingConfig())
     from stafpipe.controllers.base import TeamInfo
 
@@ -108,6 +118,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     rows = [(name, *ten_robots(args.episodes, name, args.ensemble)) for name in args.maps]
+    paper = [(name, *ten_robots(args.episodes, name, [], "staf")) for name in args.maps]
     plan, feat, net, edges = thousand_robots(args.repeats, args.ensemble)
     print("| team | per step (median) | 99th percentile step | split step (cut, median) | target |")
     print("|---|---|---|---|---|")
@@ -115,6 +126,8 @@ def main() -> None:
     what = f"method=staf_planned, {runs} run{'s' if runs > 1 else ''}"
     for name, median, worst, split in rows:
         print(f"| 10 robots, {name}, {what} act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
+    for name, median, worst, split in paper:
+        print(f"| 10 robots, {name}, method=staf act() | {median:.2f} ms | {worst:.2f} ms | {split:.2f} ms | <= 1 ms |")
     print(
         f"| 1,000 robots ({edges:,} directed edges): plan {plan:.1f} + features {feat:.1f} + network {net:.1f} | "
         f"{plan + feat + net:.1f} ms | - | - | <= 50 ms |"

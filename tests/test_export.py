@@ -18,7 +18,7 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
     episode on the corridor driven towards the adapter's aim (robots close up, neighbours come and go)."""
     import dataclasses
 
-    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.checkpoint import load_policy
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import teams_of
@@ -35,7 +35,7 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
     plan = made_by.get("train_ppo", {}).get("plan")
     from stafpipe.controllers.plan_config import PlanConfig
 
-    adapter = ADAPTERS[method](policy.cfg, RewardConfig(), PlanConfig(**plan) if plan else PlanConfig(), 2.0)
+    adapter = adapter_class(method)(policy.cfg, RewardConfig(), PlanConfig(**plan) if plan else PlanConfig(), 2.0)
     world_cfg = WorldConfig()
     worlds = Worlds([scenario], SensingConfig(), world_cfg)
     obs = worlds.reset([3])

@@ -24,7 +24,7 @@ from stafpipe.controllers.staf import StafMethodConfig
 from stafpipe.episode import episode_context
 from stafpipe.geometry import Geometry
 from stafpipe.launch import launch
-from stafpipe.learning.adapters import ADAPTERS
+from stafpipe.learning.adapters import ADAPTERS, adapter_class
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
 from stafpipe.learning.teachers import AVOID_GAIN, SLIDE_MARGIN, off_the_wall, teacher_actions
@@ -38,7 +38,7 @@ def test_trainer_has_no_method_name_branches() -> None:
     """A new learned method is a network, an adapter and a config: the trainer never names one."""
     for module in (ppo, rollout, train_stage):
         assert not re.search(r"""["'](staf_planned|staf|dgnn)["']""", inspect.getsource(module)), module.__name__
-    assert set(ADAPTERS) == {"dgnn", "staf_planned"}
+    assert set(ADAPTERS) == {"dgnn", "staf", "staf_planned"}
 
 
 def _team(sc, worlds: Worlds, w: int = 0) -> TeamInfo:
@@ -63,7 +63,7 @@ def test_dgnn_is_guided_through_the_middle_of_a_passage_its_shortest_path_hugs()
     worlds = Worlds([sc], SensingConfig())
     worlds.reset([0])
     team = _team(sc, worlds)
-    adapter = ADAPTERS["dgnn"](PolicyConfig(), TrainPPOConfig().reward, None, 2.0)
+    adapter = adapter_class("dgnn")(PolicyConfig(), TrainPPOConfig().reward, None, 2.0)
     adapter.begin([team])
     geometry = Geometry.of(sc)
     inside = lambda path: path[(path[:, 0] > 12) & (path[:, 0] < 24)]  # noqa: E731  (within the corridor)
@@ -73,7 +73,7 @@ def test_dgnn_is_guided_through_the_middle_of_a_passage_its_shortest_path_hugs()
     assert guided > team.passage_width / 2 - 0.1  # the guide keeps to the middle: 1.41 m from either wall
 
 
-@pytest.mark.parametrize("method", ["dgnn", "staf_planned"])
+@pytest.mark.parametrize("method", ["dgnn", "staf_planned", "staf"])
 def test_controller_acts_as_the_rollout_adapter_does(method) -> None:
     """The evaluation controller and the training rollout drive the same network through the same adapter: the
     controller's command equals the policy mean on the adapter's batched features, step after step."""
@@ -83,13 +83,15 @@ def test_controller_acts_as_the_rollout_adapter_does(method) -> None:
         "staf_planned": lambda: StafMethodConfig(
             ensemble=[]
         ),  # the checkpoint alone (the default adds its partner run)
+        "staf": lambda: __import__("stafpipe.methods.staf.method", fromlist=["x"]).StafConfig(),
     }[method]()
     ctrl = make_controller(cfg)
     worlds = Worlds([sc], SensingConfig())
     obs = worlds.reset([3])
     team = _team(sc, worlds)
     ctrl.reset(team)
-    adapter = ADAPTERS[method](ctrl.policy.cfg, TrainPPOConfig().reward, getattr(cfg, "plan", None), 2.0)
+    kind = adapter_class(method)
+    adapter = kind(ctrl.policy.cfg, TrainPPOConfig().reward, getattr(cfg, kind.plan_key, None), 2.0)
     adapter.begin([team])
     for _ in range(60):
         f = adapter.step(obs, 0.1 if worlds.time[0] > 0 else 0.0).features
@@ -220,7 +222,7 @@ def test_imitation_teacher_aims_where_the_network_does_unless_privileged() -> No
     team, gaps = _team(sc, worlds), {}
     for privileged in (False, True):
         plan = PlanConfig(adapt="nominal", balance=True)
-        adapter = ADAPTERS["staf_planned"](PolicyConfig(), TrainPPOConfig().reward, plan, 2.0)
+        adapter = adapter_class("staf_planned")(PolicyConfig(), TrainPPOConfig().reward, plan, 2.0)
         adapter.begin([team], privileged=privileged)
         pos, gap = obs.position.copy(), 0.0
         for _ in range(400):  # robots step straight to their targets (1 m/s, 0.1 s)
@@ -247,7 +249,7 @@ def test_imitation_warm_start_fits_the_teacher(tmp_path) -> None:
         # state like those it trains on); on the extended path they start at the robots
         plan=PlanConfig(extend_path=False),
     )
-    adapter = ADAPTERS["staf_planned"](tc.policy, tc.reward, tc.plan, 2.0)
+    adapter = adapter_class("staf_planned")(tc.policy, tc.reward, tc.plan, 2.0)
     torch.manual_seed(0)
     policy = adapter.network(tc.policy)
     # exact positions and small start offsets, so the states judged are like the 60 it trains on
@@ -362,7 +364,7 @@ def test_robots_faster_than_the_training_robots_are_driven_no_faster(tmp_path, t
     obs = worlds.reset([3])
     team = _team(sc, worlds)
     ctrl.reset(team)
-    adapter = ADAPTERS["dgnn"](ctrl.policy.cfg, TrainPPOConfig().reward, None, 2.0)
+    adapter = adapter_class("dgnn")(ctrl.policy.cfg, TrainPPOConfig().reward, None, 2.0)
     adapter.begin([team])
     fastest = 0.0
     for _ in range(30):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from stafpipe.learning.adapters import ADAPTERS
+from stafpipe.learning.adapters import adapter_class
 from stafpipe.learning.checkpoint import build_policy
 from stafpipe.learning.config import PolicyConfig, RewardConfig, TrainPPOConfig
 from stafpipe.learning.ppo import teams_of
@@ -64,7 +64,7 @@ def test_batched_env_rewards_are_the_trainers(method) -> None:
     drawn = [(corridor, *path_and_width(corridor))] * 3
     worlds = Worlds([corridor] * 3, SensingConfig(), WorldConfig())
     obs = worlds.reset([7, 8, 9])
-    adapter = ADAPTERS[method](policy_cfg, RewardConfig(), None, 2.0)
+    adapter = adapter_class(method)(policy_cfg, RewardConfig(), None, 2.0)
     adapter.begin(teams_of(drawn, worlds))
     rollout, stats = collect(policy, adapter, worlds, obs, tc, 0.3, deterministic=True)
 

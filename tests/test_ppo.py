@@ -191,7 +191,7 @@ def test_init_from_starts_at_the_loaded_weights_and_refuses_other_settings(tmp_p
 
 
 def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) -> None:
-    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import _teacher_samples
 
@@ -202,7 +202,7 @@ def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) ->
         imitation=ImitationConfig(epochs=1, teacher="avoiding", near_weight=5.0, noise=0.0),
     )
     corridor = load_named_scenario("corridor")
-    adapter = ADAPTERS["dgnn"](tc.policy, RewardConfig(), None, 2.0)
+    adapter = adapter_class("dgnn")(tc.policy, RewardConfig(), None, 2.0)
     drawn = [(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)]
     *_, weight = _teacher_samples(None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0))
     # a circle of 10 at 1 m spacing: some robots brake for a neighbour within 0.35 m, most do not
@@ -242,7 +242,7 @@ def test_wall_copies_add_relabelled_near_wall_states() -> None:
     """`imitation.wall_copies=1`: each collected step gets a copy whose robots all have a wall point 0-0.4 m from
     their surface, at a random bearing, labelled with the teacher's (braking) action on that copy; the real samples
     are those of a run without copies."""
-    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import _teacher_samples
     from stafpipe.learning.teachers import NEAR_WALL_GAP
@@ -250,7 +250,7 @@ def test_wall_copies_add_relabelled_near_wall_states() -> None:
     im = ImitationConfig(epochs=1, teacher="avoiding", noise=0.0, wall_copies=1.0)
     tc = TrainPPOConfig(method="staf_planned", worlds=1, episode_steps=20, policy=PolicyConfig(hidden=16), imitation=im)
     corridor = load_named_scenario("corridor")
-    adapter = ADAPTERS["staf_planned"](tc.policy, RewardConfig(), None, 2.0)
+    adapter = adapter_class("staf_planned")(tc.policy, RewardConfig(), None, 2.0)
     drawn = [(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)]
     own, _edge, _mask, label, _w = _teacher_samples(
         None, adapter, drawn, WorldConfig(), SensingConfig(), tc, np.random.default_rng(0)
@@ -358,7 +358,7 @@ def test_drive_input_and_direction_weight_are_checked() -> None:
 def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error() -> None:
     """The update reads its losses once, after its minibatches (not at each, which waits for a GPU); a NaN there
     stops training rather than saving NaN weights."""
-    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.dgnn import DGNNPolicy
     from stafpipe.learning.rollout import collect
     from stafpipe.world import Worlds
@@ -369,7 +369,7 @@ def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error
     policy = DGNNPolicy(tc.policy)
     worlds = Worlds([corridor] * 2, SensingConfig())
     obs = worlds.reset([0, 1])
-    adapter = ADAPTERS["dgnn"](tc.policy, tc.reward, None, 2.0)
+    adapter = adapter_class("dgnn")(tc.policy, tc.reward, None, 2.0)
     adapter.begin(ppo.teams_of([(corridor, np.array([[4.0, 6.0], [26.0, 6.0]]), 2.4)] * 2, worlds))
     ro, _ = collect(policy, adapter, worlds, obs, tc, 0.3)
     adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)

@@ -28,10 +28,10 @@ EXAMPLES = {
     "train-high": ["stafpipe train-high experiment=smoke", "stafpipe train-high seed=2 'data.mix=[wedge,line]'"],
     "train-ppo": [
         "stafpipe train-ppo train_ppo.method=dgnn train_ppo.iterations=50",
-        "stafpipe train-ppo experiment=staf_planned_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'",
+        "stafpipe train-ppo experiment=staf_train 'train_ppo.scenarios=[outputs/generate-maps/DATE/TIME/maps]'",
     ],
     "eval": [
-        "stafpipe eval method=staf_planned scenario=bridge formation=wedge eval.episodes=20",
+        "stafpipe eval method=staf scenario=bridge formation=wedge eval.episodes=20",
         "stafpipe eval -m hydra/launcher=local method=staf_planned,dgnn,lf scenario=corridor",
     ],
     "ablate": ["stafpipe ablate ablate.study=subteam_count", "stafpipe ablate ablate.study=noise seed=2"],
@@ -209,8 +209,8 @@ def inspect(
 def export(
     network: str = typer.Argument(
         ...,
-        help="staf_planned (the GNN + low level of STAF-planned, ours), dgnn (the DGNN policy) or high (STAF's "
-        "deep graph cut).",
+        help="staf (the paper's STAF: GNN + low level), staf_planned (the same network under our plan), dgnn (the "
+        "DGNN policy) or high (STAF's deep graph cut).",
     ),
     checkpoint: str = typer.Option(
         "", "--checkpoint", help="A policy.pt / high-level checkpoint; empty: the shipped one."

@@ -1,8 +1,9 @@
 """`stafpipe export`: a learned network as an ONNX file a robot can run without torch or stafpipe (docs/export.md).
 
-Three networks, one team (one world) per call, any number of robots (the `robots` axis is dynamic):
-- `staf_planned`: STAF-planned's (ours) intermediate GNN phi and low level psi (STAF, Sec. 3): own (n, 6), edge (n, n,
-  9), mask (n, n) -> action (n, 2), the mean action a_i = psi(f_i) (learning/staf_net.py).
+Four networks, one team (one world) per call, any number of robots (the `robots` axis is dynamic):
+- `staf`, `staf_planned`: the intermediate GNN phi and low level psi (STAF, Sec. 3) of the paper's STAF and of
+  STAF-planned (ours): own (n, 6), edge (n, n, 9), mask (n, n) -> action (n, 2), the mean action a_i = psi(f_i)
+  (learning/staf_net.py); the same network, trained under other rules.
 - `dgnn`: the DGNN baseline's policy (Blumenkamp et al., ICRA 2022): own (n, 7), edge (n, n, 5), mask (n, n) ->
   action (n, 2) (learning/dgnn.py).
 - `high`: STAF's deep graph cut (Sec. 3): x (n, F), adjacency (n, n), m () -> assignment (n, m_max), the soft
@@ -30,7 +31,7 @@ from stafpipe.io import atomic_write
 from stafpipe.learning.policy_net import PolicyNet
 
 log = logging.getLogger(__name__)
-NETWORKS = ("staf_planned", "dgnn", "high")
+NETWORKS = ("staf", "staf_planned", "dgnn", "high")
 OPSET = 18
 
 
@@ -98,7 +99,8 @@ def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Ten
         }
     from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
 
-    own, edge = (STAF_OWN + int(module.policy.cfg.drive_input), STAF_EDGE) if network == "staf_planned" else (OWN, EDGE)
+    staf = network in ("staf", "staf_planned")
+    own, edge = (STAF_OWN + int(module.policy.cfg.drive_input), STAF_EDGE) if staf else (OWN, EDGE)
     mask = (torch.rand(n, n, generator=gen) < 0.6) & ~torch.eye(n, dtype=torch.bool)
     return {
         "own": torch.randn(n, own, generator=gen),
@@ -118,7 +120,7 @@ def load_network(network: str, checkpoint: str = "", ensemble: list[str] | None 
         from stafpipe.highlevel.checkpoint import load_checkpoint
 
         if ensemble:
-            raise StafpipeError("export: --ensemble is for the policies (staf_planned, dgnn), not the deep graph cut")
+            raise StafpipeError("export: --ensemble is for policies (staf, staf_planned, dgnn), not the deep graph cut")
         model, made_by = load_checkpoint(checkpoint)
         return DenseGraphCut(model).eval(), made_by
     from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from stafpipe.learning.adapters import ADAPTERS
+from stafpipe.learning.adapters import ADAPTERS, adapter_class
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.ppo import teams_of
 from stafpipe.learning.rollout import commands, episode_stats, step_reward, world_routes
@@ -60,7 +60,7 @@ class BatchedTeamEnv:
         self.scenario, self.size, self.episode_steps = sc, worlds, episode_steps
         self.world_cfg, self.sensing = world or WorldConfig(), sensing or SensingConfig()
         self.reward_cfg, self.tolerance = reward or RewardConfig(), goal_tolerance
-        self.adapter = ADAPTERS[method](policy or PolicyConfig(), self.reward_cfg, plan, self.sensing.radius)
+        self.adapter = adapter_class(method)(policy or PolicyConfig(), self.reward_cfg, plan, self.sensing.radius)
         self.drawn = [(sc, *path_and_width(sc))] * worlds
         self.worlds = Worlds([sc] * worlds, self.sensing, self.world_cfg)
         self.n = self.worlds.n

@@ -125,7 +125,17 @@ class EvalConfig:
         require(self.cfi_margin >= 0, f"{key}.cfi_margin", "must be >= 0", self.cfi_margin)
 
 
-PLOT_KINDS = ("trajectories", "partitions", "training", "connectivity", "regions", "timing", "table", "report")
+PLOT_KINDS = (
+    "trajectories",
+    "partitions",
+    "training",
+    "connectivity",
+    "regions",
+    "timing",
+    "table",
+    "report",
+    "adaptation",
+)
 FORMATS = ("png", "pdf", "svg")
 
 

@@ -18,6 +18,7 @@ METHODS: dict[str, tuple[str, str]] = {
     "zhu": ("stafpipe.controllers.zhu_config:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
     "staf_planned": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),
+    "staf": ("stafpipe.methods.staf.method:StafConfig", "stafpipe.methods.staf.method:StafController"),
 }
 
 __all__ = ["METHODS", "Controller", "Event", "TeamInfo", "make_controller", "method_config_class"]

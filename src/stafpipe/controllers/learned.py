@@ -16,7 +16,7 @@ import torch
 from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo, forward_capped, limit_approach
 from stafpipe.controllers.orca import avoid_movers
 from stafpipe.errors import StafpipeError
-from stafpipe.learning.adapters import ADAPTERS
+from stafpipe.learning.adapters import adapter_class
 from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
 from stafpipe.learning.config import RewardConfig
 from stafpipe.learning.rollout import commands
@@ -52,16 +52,19 @@ PLAN_SAFEGUARDS = (
 
 
 def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:
-    """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the plan
-    (`method.plan.*` against `train_ppo.plan.*`) and the sensing radius (against `sensing.radius`), as far as the
-    checkpoint recorded them. Key -> (this run's value, the training value)."""
+    """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the method's plan
+    settings (`method.<plan_key>.*` against `train_ppo.<plan_key>.*`, the adapter's `plan_key`: `plan` for
+    staf_planned, `subteaming` for staf) and the sensing radius (against `sensing.radius`), as far as the checkpoint
+    recorded them. Key -> (this run's value, the training value)."""
     trained = made_by.get("train_ppo", {})
     differ: dict[str, tuple[Any, Any]] = {}
-    plan, recorded = getattr(cfg, "plan", None), trained.get("plan")
+    field = adapter_class(cfg.name).plan_key
+    plan, recorded = getattr(cfg, field, None), trained.get(field)
+    skip = PLAN_SAFEGUARDS if field == "plan" else ()
     if plan is not None and isinstance(recorded, dict):
         for key, value in dataclasses.asdict(plan).items():
-            if key in recorded and recorded[key] != value and key not in PLAN_SAFEGUARDS:
-                differ[f"method.plan.{key}"] = (value, recorded[key])
+            if key in recorded and recorded[key] != value and key not in skip:
+                differ[f"method.{field}.{key}"] = (value, recorded[key])
     radius = made_by.get("sensing", {}).get("radius")
     if radius is not None and float(radius) != float(cfg.sensing_radius):
         differ["method.sensing_radius"] = (cfg.sensing_radius, radius)
@@ -100,9 +103,8 @@ class LearnedController(Controller):
         if paths:  # the run's config may leave `method.ensemble` unset: its log says what acted
             runs = [cfg.checkpoint or f"shipped:{cfg.name}", *paths]
             log.info("%s acts with the mean action of %d runs: %s", cfg.name, len(runs), ", ".join(runs))
-        self.adapter = ADAPTERS[cfg.name](
-            self.policy.cfg, RewardConfig(), getattr(cfg, "plan", None), cfg.sensing_radius
-        )
+        kind = adapter_class(cfg.name)
+        self.adapter = kind(self.policy.cfg, RewardConfig(), getattr(cfg, kind.plan_key, None), cfg.sensing_radius)
         # One thread: a parallel matrix product sums in another order, and a closed loop grows the last bit into
         # another trajectory (measured: DGNN's corridor wedge, 1 vs 2 threads, other TT in 4 of 5 episodes). With
         # one thread the seed fixes the episode on any number of cores; these networks are no slower with it.
@@ -177,7 +179,7 @@ class LearnedController(Controller):
             robot = self.adapter.teams[0].scenario.spec.robot
             action = teacher_actions(
                 self.teacher,
-                targets - obs.position,
+                self.adapter.teacher_aim() - obs.position,  # the imitation teacher's aim (Adapter.teacher_aim)
                 obs,
                 robot.radius,
                 self.max_speed,

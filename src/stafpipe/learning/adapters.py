@@ -10,7 +10,8 @@ method-name branches: a new learned method is a network file, an adapter here an
 from __future__ import annotations
 
 import dataclasses
-from typing import ClassVar, NamedTuple
+import importlib
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -41,8 +42,10 @@ class Adapter:
 
     name: ClassVar[str] = ""
     network: ClassVar[type[PolicyNet]]
+    plan_key: ClassVar[str] = "plan"
+    """The field of the method's config (and of `train_ppo`) holding the settings passed as `plan`."""
 
-    def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: PlanConfig | None, sensing_radius: float):
+    def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: Any, sensing_radius: float):
         self.policy, self.reward_cfg, self.plan_cfg, self.sensing_radius = policy, reward, plan, sensing_radius
         self.teams: list[TeamInfo] = []
         self._paths: list[tuple[object, np.ndarray]] = []  # (scenario, its centred path), by identity
@@ -132,7 +135,27 @@ class DGNNAdapter(Adapter):
         return features(obs, self.policy.goal_clip, self.sensing_radius, self._target)
 
 
-class StafAdapter(Adapter):
+class SubteamAdapter(Adapter):
+    """An adapter whose worlds each hold a plan of subteams (`self.plans`: goal, labels, same, expected and events):
+    goals, subteams and events are the plan's; the reward adds STAF's R^adp and proximity terms (`staf_penalties`)."""
+
+    plans: list
+
+    def goals(self) -> np.ndarray:
+        return np.stack([p.goal for p in self.plans])  # the regroup reassigns the goal slots
+
+    def reward(self, pos: np.ndarray, vel: np.ndarray, obs: Observation) -> np.ndarray:
+        radius = self.teams[0].scenario.spec.robot.radius
+        return staf_penalties(pos, vel, obs, self.plans, self.reward_cfg, radius)
+
+    def subteams(self) -> np.ndarray:
+        return np.array([p.labels for p in self.plans])
+
+    def drain_events(self, w: int) -> list[tuple[str, list[int], str]]:
+        return self.plans[w].drain_events()
+
+
+class StafAdapter(SubteamAdapter):
     """STAF (Sec. 3, App. B): the plan (deep graph cut, subteams, regroup;
     controllers/staf_plan.py) gives each robot its target; the network sees the robot-frame states of
     `features.staf_features`; the reward adds R^adp and the proximity penalty (`staf_penalties`)."""
@@ -183,19 +206,6 @@ class StafAdapter(Adapter):
         flag = self._diff_drive if self.policy.drive_input else None
         return staf_features(obs, self._target, self._same, self.policy.goal_clip, self.sensing_radius, flag)
 
-    def goals(self) -> np.ndarray:
-        return np.stack([p.goal for p in self.plans])  # the regroup reassigns the goal slots
-
-    def reward(self, pos: np.ndarray, vel: np.ndarray, obs: Observation) -> np.ndarray:
-        radius = self.teams[0].scenario.spec.robot.radius
-        return staf_penalties(pos, vel, obs, self.plans, self.reward_cfg, radius)
-
-    def subteams(self) -> np.ndarray:
-        return np.array([p.labels for p in self.plans])
-
-    def drain_events(self, w: int) -> list[tuple[str, list[int], str]]:
-        return self.plans[w].drain_events()
-
 
 def staf_penalties(
     pos: np.ndarray, vel: np.ndarray, obs: Observation, plans: list, rc: RewardConfig, radius: float
@@ -216,5 +226,16 @@ def staf_penalties(
     return rc.formation * adp - rc.proximity * near
 
 
-ADAPTERS: dict[str, type[Adapter]] = {a.name: a for a in (DGNNAdapter, StafAdapter)}
-"""Learned methods by name (`train_ppo.method`, the `method` of a policy checkpoint)."""
+ADAPTERS: dict[str, str] = {
+    "dgnn": "stafpipe.learning.adapters:DGNNAdapter",
+    "staf_planned": "stafpipe.learning.adapters:StafAdapter",
+    "staf": "stafpipe.methods.staf.adapter:StafAdapter",
+}
+"""Learned methods by name (`train_ppo.method`, the `method` of a policy checkpoint): where each adapter lives, imported
+when first used (a method's package imports this module, never the other way)."""
+
+
+def adapter_class(name: str) -> type[Adapter]:
+    """The adapter of learned method `name` (a key of ADAPTERS)."""
+    module, _, attr = ADAPTERS[name].partition(":")
+    return getattr(importlib.import_module(module), attr)

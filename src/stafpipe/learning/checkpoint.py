@@ -17,9 +17,9 @@ FORMAT = "stafpipe.policy/1"
 
 def build_policy(method: str, cfg: PolicyConfig) -> PolicyNet:
     """A fresh policy network of the learned method `method` (its adapter names the network)."""
-    from stafpipe.learning.adapters import ADAPTERS
+    from stafpipe.learning.adapters import adapter_class
 
-    return ADAPTERS[method].network(cfg)
+    return adapter_class(method).network(cfg)
 
 
 class PolicyCheckpointError(StafpipeError):

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
+from stafpipe.methods.staf.subteaming import SubteamingConfig
 
 
 @dataclass
@@ -181,6 +182,9 @@ class TrainPPOConfig:
     plan: PlanConfig = field(default_factory=PlanConfig)
     """method=staf_planned: the execution plan (subteams, sequencing, regroup) the policy is trained on; an eval of
     `method=staf_planned` must use the same settings."""
+    subteaming: SubteamingConfig = field(default_factory=SubteamingConfig)
+    """method=staf: the paper's rules (m, subteam goals, turns, regroup; methods/staf/subteaming.py) the policy is
+    trained under; an eval of `method=staf` must use the same settings."""
 
     def check(self, key: str = "train_ppo") -> None:
         from stafpipe.learning.adapters import ADAPTERS
@@ -212,9 +216,9 @@ class TrainPPOConfig:
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
         require(
-            not self.policy.drive_input or self.method == "staf_planned",
+            not self.policy.drive_input or self.method in ("staf", "staf_planned"),
             f"{key}.policy.drive_input",
-            "is read by method=staf_planned only",
+            "is read by method=staf and method=staf_planned only",
             self.method,
         )
         from stafpipe.devices import check_device
@@ -257,6 +261,7 @@ class TrainPPOConfig:
             0 <= self.reward.adp_lambda <= 1, f"{key}.reward.adp_lambda", "must be in [0, 1]", self.reward.adp_lambda
         )
         self.plan.check(f"{key}.plan")
+        self.subteaming.check(f"{key}.subteaming")
         require(
             self.policy.hidden >= 1 and self.policy.message_layers >= 0,
             f"{key}.policy",

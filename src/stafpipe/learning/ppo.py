@@ -23,7 +23,7 @@ import torch
 
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.errors import StafpipeError
-from stafpipe.learning.adapters import ADAPTERS, Adapter
+from stafpipe.learning.adapters import Adapter, adapter_class
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.learning.features import Features
 from stafpipe.learning.policy_net import PolicyNet
@@ -263,7 +263,8 @@ def train_ppo(
     torch.set_num_threads(tc.threads)
     device = training_device(tc.device, "train_ppo.device")
     torch.manual_seed(seed)
-    adapter = ADAPTERS[tc.method](tc.policy, tc.reward, tc.plan, sensing.radius)
+    kind = adapter_class(tc.method)
+    adapter = kind(tc.policy, tc.reward, getattr(tc, kind.plan_key), sensing.radius)
     policy = adapter.network(tc.policy)
     if tc.init_from and resume_from is None:
         policy.load_state_dict(initial_weights(tc).state_dict())

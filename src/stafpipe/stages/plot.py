@@ -153,6 +153,33 @@ def _partition_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     return figures
 
 
+def _adaptation_figures(pc: PlotConfig, run_dir: Path, out_dir: Path) -> dict[str, Figure]:
+    """Each episode's subteam scale and type integrity over time (adaptation.py), and their samples as
+    adaptation_<episode>.csv, all episodes read before anything is written."""
+    from stafpipe.adaptation import adaptation_series
+    from stafpipe.episode_log import read_episode
+    from stafpipe.metrics import MetricContext
+    from stafpipe.plots.adaptation import adaptation_figure
+    from stafpipe.plots.trajectories import episode_files
+
+    files = episode_files(run_dir)
+    if not files:
+        raise StafpipeError(
+            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
+        )
+    files = files[: pc.max_episodes] if pc.max_episodes else files
+    series = {}
+    for path in files:
+        rec = read_episode(path)
+        ctx = MetricContext(**rec.context)
+        series[path.stem] = (rec, adaptation_series(rec.time, rec.positions, rec.velocities, rec.subteams, ctx))
+    for stem, (_, frame) in series.items():
+        write_table(frame, out_dir / f"adaptation_{stem}")
+    return {
+        f"adaptation_{stem}": adaptation_figure(frame, f"{rec.method}, {stem}") for stem, (rec, frame) in series.items()
+    }
+
+
 def _training_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     """Learning curves of a train-ppo run (learning_curves.parquet) or loss curves of a train-high run
     (losses.parquet)."""
@@ -210,6 +237,12 @@ def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
                 outputs += save_figure(
                     levels_figure(table.fillna({"label": ""})), out_dir / "levels", pc.formats, pc.dpi
                 )
+        print("\n".join(str(p) for p in outputs))
+        return outputs
+    if pc.kind == "adaptation":
+        figures = _adaptation_figures(pc, run_dir, out_dir)
+        for name, fig in figures.items():
+            outputs += save_figure(fig, out_dir / name, pc.formats, pc.dpi)
         print("\n".join(str(p) for p in outputs))
         return outputs
     draw = {
