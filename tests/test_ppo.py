@@ -84,9 +84,10 @@ def _same(a, b) -> bool:
     return all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True))
 
 
-def test_training_is_deterministic_and_resumes_exactly(tmp_path) -> None:
-    full, hist = _train(tmp_path / "a")
-    again, _ = _train(tmp_path / "b")
+@pytest.mark.parametrize("method", ["dgnn", "staf"])
+def test_training_is_deterministic_and_resumes_exactly(tmp_path, method) -> None:
+    full, hist = _train(tmp_path / "a", method=method)
+    again, _ = _train(tmp_path / "b", method=method)
     assert _same(full, again)
     assert all(math.isfinite(v) for row in hist for v in row.values() if isinstance(v, float))
 
@@ -95,8 +96,8 @@ def test_training_is_deterministic_and_resumes_exactly(tmp_path) -> None:
             raise KeyboardInterrupt  # after iteration 2's state was saved
 
     with pytest.raises(KeyboardInterrupt):
-        _train(tmp_path / "c", on_iteration=killed)
-    resumed, rhist = _train(tmp_path / "c", resume_from=tmp_path / "c" / ppo.STATE_FILE)
+        _train(tmp_path / "c", on_iteration=killed, method=method)
+    resumed, rhist = _train(tmp_path / "c", resume_from=tmp_path / "c" / ppo.STATE_FILE, method=method)
     assert _same(full, resumed)
     assert [r["iteration"] for r in rhist] == [1, 2, 3]
     assert [r["charts/episode_return"] for r in rhist] == [r["charts/episode_return"] for r in hist]
