@@ -1,7 +1,7 @@
 """ROS 2 CDR (little-endian, XCDR1) encoding of the episode log's five message types, straight from numpy arrays.
 
 mcap-ros2-support's dynamic encoder walks every message as nested Python dicts, which cost about 1 ms per control step
-for a team of ten (a third of an L&F evaluation's time, measured 2026-11-28). These encoders write the same bytes
+for a team of ten (a third of an L&F evaluation's time, measured). These encoders write the same bytes
 from the arrays: `tests/test_episode_log.py` checks them byte for byte against mcap-ros2-support's encoder, and the
 logs are still read by its decoder (and by Foxglove and rosbag2, which read CDR).
 """

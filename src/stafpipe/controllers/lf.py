@@ -48,9 +48,9 @@ class LFConfig:
     """Added to the robot radius as the leader path's clearance from obstacles (m)."""
     local_planner: str = "auto"
     """Collision avoidance: `orca` (ORCA, controllers/orca.py, with method=zhu's horizon 1 s, margin 0.1 m and
-    recovery 0.1 s), `cap` (the approach cap above; every robot until 2026-12-06), `forward` (the cap, and on a
+    recovery 0.1 s), `cap` (the approach cap above), `forward` (the cap, and on a
     differential drive the same cap on the motion the drive makes from the capped command, `base.forward_capped`), or
-    `auto`: ORCA for holonomic robots, `forward` for differential drive (since 2026-12-06; `cap` before).
+    `auto`: ORCA for holonomic robots, `forward` for differential drive.
     docs/baselines.md has them measured."""
 
     def check(self, key: str = "method") -> None:

@@ -24,7 +24,7 @@ class PlanConfig:
     adapt: str = "nominal"
     """Formation adaptation in a narrow passage: `nominal` (the plan keeps each subteam's formation at the team's
     nominal spacing and the policy deforms it itself, as STAF Sec. 3 attributes to the intermediate GNN under R^adp;
-    what the shipped policy was trained on since 2026-12-03) or `geometric` (the plan shrinks the subteam's spacing to
+    what the shipped policy was trained on) or `geometric` (the plan shrinks the subteam's spacing to
     the free width ahead: our option for comparison, docs/staf.md "Learned adaptation")."""
     single_file: bool = True
     """Where a subteam's formation does not fit even at the smallest spacing (2r + min_gap; e.g. bollards 1.1 m
@@ -81,8 +81,8 @@ class PlanConfig:
     stretch, as trained, and where that stretch reaches to the path's end it waits for ever. docs/staf.md."""
     end_wait: float = 2.0
     """With `end_home`: such a robot also starts for home once it has moved less than 5 cm in this many seconds (its
-    target, among robots already home, cannot be reached); 0: only within a radius of its target, as until
-    2026-12-06. docs/staf.md."""
+    target, among robots already home, cannot be reached); 0: only within a radius of its target.
+    docs/staf.md."""
     in_sight: bool = True
     """A robot whose straight way to its target has crossed an obstacle for 2 s (a wall between them) aims instead at
     the path, up to 1 m from its own place on it, until its target is in sight again; false: it heads for its target
@@ -103,8 +103,8 @@ class PlanConfig:
     sight_wait: float = 1.0
     """Seconds a robot's way to its target must have crossed an obstacle before it aims at the path instead
     (`in_sight`): a robot sliding round a bollard sees its target again within a second, one pressed against a wall
-    never does; 0 (at once) pulled robots sliding round bollards onto the path into their neighbours, and 2 s (the
-    shipped policy's training, before 2026-12-03) left an outer robot at a passage's mouth pressed against the wall's
+    never does; 0 (at once) pulled robots sliding round bollards onto the path into their neighbours, and 2 s (an
+    earlier policy's training) left an outer robot at a passage's mouth pressed against the wall's
     face until it turned into the corner. 1 s: chosen on 40 validation maps (docs/staf.md)."""
     in_world: bool = True
     """Targets are kept inside the world's bounds, a radius and `margin` from its edge: a waiting subteam's column

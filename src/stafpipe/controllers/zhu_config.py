@@ -44,7 +44,7 @@ class ZhuConfig:
     team_reference: bool = True
     """Ours: a team more than max_lag from p_r whose straight way to p_r crosses an obstacle (for `team_wait`) aims
     at the path's point `team_lookahead` ahead of its own place on the path (never beyond p_r), for its region's
-    "ahead" and its formation's fit; false: every team aims at p_r, as until 2026-12-06. With one p_r, a team left
+    "ahead" and its formation's fit; false: every team aims at p_r. With one p_r, a team left
     behind a wall while another went on through the door aimed at the wall's face nearest p_r for ever (docs/zhu.md,
     "Teams left behind")."""
     team_lookahead: float = 1.0
@@ -71,7 +71,7 @@ class ZhuConfig:
     slots needs the larger margin: Scenario 2 had 19 contacts per episode with 0.02, 9 with 0.1)."""
     local_planner: str = "orca"
     """Tracking the slots (Sec. III: [22]'s collision-avoiding MPC): `orca` (controllers.orca), or `cap`: the step
-    with the classical approach cap (avoid_distance, avoid_gain, stop_gap), as until 2026-11-28 (docs/zhu.md)."""
+    with the classical approach cap (avoid_distance, avoid_gain, stop_gap), (docs/zhu.md)."""
     target_gap: float = 0.1
     """Ours: targets of two robots closer than 2 r + target_gap are pushed apart (as STAF's plan does); 0: off."""
     orca_horizon: float = ORCA_HORIZON
@@ -86,12 +86,12 @@ class ZhuConfig:
     home_slots: bool = True
     """Ours: once p_r has reached the goal, every team that is not left behind out of its sight (`team_reference`),
     not only the whole team merged again, heads for the goal slots one assignment of all robots gives its members;
-    false: a subteam fits its own formation round the goal, as until 2026-12-06 (teams that never merged again, a
+    false: a subteam fits its own formation round the goal (teams that never merged again, a
     permanent fault or 20 robots too many to merge in their regions, stood there on no goal slot: docs/zhu.md,
     "Teams apart at the goal")."""
     stall_time: float = 3.0
     """Ours (`zhu_decisions.TeamStall`): a team that stays over max_lag from p_r and moves less than dp_min in
-    this many seconds splits in two; 0: off, as until 2026-12-06. 3 s: the n_dead steps of a stuck robot."""
+    this many seconds splits in two; 0: off. 3 s: the n_dead steps of a stuck robot."""
 
     def check(self, key: str = "method") -> None:
         require(self.visibility > 0, f"{key}.visibility", "must be > 0 (the visibility radius r_B)", self.visibility)

@@ -99,7 +99,7 @@ class TrainHighConfig:
     """Each team, each epoch, is cut into m subteams drawn from this list (capped at n - 1)."""
     loss: LossWeights = field(default_factory=LossWeights)
     threads: int = 1
-    """torch threads. 1: the same weights for a seed on every run (measured 2026-11-28: two runs of the loss-term
+    """torch threads. 1: the same weights for a seed on every run (measured: two runs of the loss-term
     ablation with 2 threads gave weights up to 0.24 apart, with 1 thread bit-identical) and no slower on 2 cores
     (10 epochs: 32 s against 34 s with 2; two 2-thread runs side by side took 7x as long, docs/method.md)."""
     device: str = "cpu"

@@ -79,7 +79,7 @@ def radius_adjacency(pos: np.ndarray, radius: float) -> np.ndarray:
 def node_features(team: Team, features: Sequence[str]) -> np.ndarray:
     """(n, F) node features of one team, in the order `features` names them (see NODE_FEATURES). Columns built apart
     and concatenated: filling one array in place gave the same values but moved where later arrays lie in memory, and
-    the graph cut's training then rounded differently (docs/reproduction.md, the report of 2026-12-04)."""
+    the graph cut's training then rounded differently (docs/reproduction.md)."""
     centre, goal_centre = team.pos.mean(axis=0), team.goal.mean(axis=0)
     cols = []
     for name in features:

@@ -50,7 +50,7 @@ class PolicyConfig:
     """The target vector is clipped to this length (m) before it enters the network."""
     guide: str = "path"
     """Target: `goal` (straight to the robot's own goal) or `path` (ahead on the path through the middle of the
-    passages, episode.centred_path, since 2026-12-06; the team's shortest path before; features.py)."""
+    passages, episode.centred_path, not the team's shortest path, which hugs walls; features.py)."""
     lookahead: float = 2.0
     """guide=path: how far ahead on the path the target lies (m)."""
     release: float = 4.0
@@ -91,7 +91,7 @@ class ImitationConfig:
     """The teacher's gain: a step of min(1, gain x distance) of top speed towards the target."""
     stop_gap: float = 0.02
     """m: the gap to robots and obstacles the teacher's approach cap brakes to (`avoiding`, `sliding`, `capped`);
-    0.02: the classical methods' (controllers/base.py STOP_GAP), the recipes before 2026-12-02 (third session)."""
+    0.02: the classical methods' (controllers/base.py STOP_GAP), as earlier recipes used."""
     noise: float = 0.3
     """Standard deviation of the noise added to the teacher's actions while collecting (states off its own way)."""
     near_weight: float = 1.0
@@ -101,11 +101,11 @@ class ImitationConfig:
     """Weight of a direction term, 1 - cos(network action, teacher action), added to each sample's squared error
     (`ppo.imitation_loss`): a scaled-down command (the `sliding` teacher's near a robot or an obstacle) is a short
     target whose direction the squared error weighs little, while a differential drive turns towards that direction
-    at its full turn rate whatever the command's length (drives.diff_drive); 0: none (the recipes before 2026-12-02)."""
+    at its full turn rate whatever the command's length (drives.diff_drive); 0: none."""
     wall_copies: float = 0.0
     """Fraction of the collected steps to which a relabelled copy is added: every robot's closest obstacle replaced
     by a wall point at a random bearing 0-0.4 m from its surface (`teachers.near_wall_copy`), the teacher's action on
-    it the label; 0: none (the shipped recipe before 2026-11-28)."""
+    it the label; 0: none."""
     neighbour_copies: float = 0.0
     """The same with each robot's nearest sensed neighbour moved, in that robot's view, to a random bearing 0-0.4 m
     from its surface (`teachers.near_neighbour_copy`); 0: none."""

@@ -35,7 +35,7 @@ AUTO_BATCH = 50
 worlds (DGNN 16.3 s one at a time, 4.5 s at 10, 3.9 s at 25 and 50) and 50 is no slower than those."""
 PAIRS_PER_BATCH = 5_000_000
 """`eval.batch=0` caps the batch at this many robot pairs (B x n^2): observations hold (B, n, n, ...) arrays. Measured
-(tracemalloc, one world step of 1,000 robots, 2026-11-28): 40 MiB at one world, 202 MiB at 5, so 50 worlds would need
+(tracemalloc, one world step of 1,000 robots): 40 MiB at one world, 202 MiB at 5, so 50 worlds would need
 about 2 GB; the cap gives 5."""
 
 
