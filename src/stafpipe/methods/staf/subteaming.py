@@ -10,8 +10,9 @@
    a formation of the same type and spacing of the subteam's size.
 4. The regroup (Sec. 3, low level): "once all subteams pass through the narrow corridor into an open area that is
    large enough for the full team", every robot's goal becomes its goal in the full team's formation.
-5. The order of entry (`take_turns`; the paper's Fig. 3 shows subteams passing one after another): the subteam nearest
-   the passage goes first, the next one waits where it stands until every robot of the one before has entered.
+5. The order of entry (`take_turns`; Sec. 4 of Fig. 3: "the first subteam starts moving, followed by the second"): the
+   subteam nearest the passage goes first, the next one waits where it stands until every robot of the one before
+   has entered.
 
 Everything else (how a subteam keeps, shrinks or stretches its formation, how robots avoid each other and the
 walls) is the learned policy's. The goal a robot's network sees is carried along the map's route (`carried_goal`:
