@@ -92,3 +92,27 @@ def check_sensing_radius(mine: float, run: float, allowed: bool, key: str) -> No
             f"{key}.sensing_radius ({mine:g}) differs from sensing.radius ({run:g}): set both to the radius the "
             f"policy was trained with (its checkpoint's made_by), or {key}.allow_mismatch=true"
         )
+
+
+class LearnedMethodChecks:
+    """The checks every learned method's config shares (`method=dgnn`, `staf`, `staf_planned`): its hand-made low level
+    and safety-layer gap, and, with the run's sensing, the radius its policy was trained with."""
+
+    sensing_radius: float
+    allow_mismatch: bool
+    low_level: str
+    proportional_gain: float
+    approach_cap_gap: float
+
+    def check_low_level(self, key: str, stop_gap: float | None = None) -> None:
+        from stafpipe.learning.teachers import check_low_level, check_stop_gap
+
+        if stop_gap is None:
+            check_low_level(self.low_level, self.proportional_gain, key)
+        else:
+            check_low_level(self.low_level, self.proportional_gain, key, stop_gap)
+        check_stop_gap(self.approach_cap_gap, f"{key}.approach_cap_gap")
+
+    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
+        """With the run's sensing: the policy's features clip what it senses at its own radius."""
+        check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)

@@ -5,13 +5,13 @@ own goal slot; no subteams. Driven through `learning/adapters.py:DGNNAdapter`, a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
+from stafpipe.config.checks import LearnedMethodChecks
 from stafpipe.controllers.learned import LearnedController
 
 
 @dataclass
-class DGNNConfig:
+class DGNNConfig(LearnedMethodChecks):
     """Config of `method=dgnn` (group `method`)."""
 
     name: str = "dgnn"
@@ -46,16 +46,7 @@ class DGNNConfig:
     obstacles")."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.learning.teachers import check_low_level, check_stop_gap
-
-        check_low_level(self.low_level, self.proportional_gain, key)
-        check_stop_gap(self.approach_cap_gap, f"{key}.approach_cap_gap")
-
-    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
-        """With the run's sensing: the policy's features clip what it senses at its own radius."""
-        from stafpipe.config.checks import check_sensing_radius
-
-        check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)
+        self.check_low_level(key)
 
 
 class DGNNController(LearnedController):

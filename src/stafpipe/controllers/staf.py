@@ -8,14 +8,14 @@ walls. Driven through `learning/adapters.py:StafAdapter`, as in training."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
+from stafpipe.config.checks import LearnedMethodChecks
 from stafpipe.controllers.learned import LearnedController
 from stafpipe.controllers.plan_config import PlanConfig
 
 
 @dataclass
-class StafMethodConfig:
+class StafMethodConfig(LearnedMethodChecks):
     """Config of `method=staf_planned` (group `method`)."""
 
     name: str = "staf_planned"
@@ -60,17 +60,8 @@ class StafMethodConfig:
     """Subteams, sequencing and regroup; keep the settings the policy was trained with (its `made_by` records them)."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.learning.teachers import check_low_level, check_stop_gap
-
-        check_low_level(self.low_level, self.proportional_gain, key, self.stop_gap)
-        check_stop_gap(self.approach_cap_gap, f"{key}.approach_cap_gap")
+        self.check_low_level(key, self.stop_gap)
         self.plan.check(f"{key}.plan")
-
-    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
-        """With the run's sensing: the policy's features clip what it senses at its own radius."""
-        from stafpipe.config.checks import check_sensing_radius
-
-        check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)
 
 
 class StafController(LearnedController):

@@ -8,14 +8,14 @@ drive every robot towards its goal, keeping and adapting its subteam's formation
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
+from stafpipe.config.checks import LearnedMethodChecks
 from stafpipe.controllers.learned import LearnedController
 from stafpipe.methods.staf.subteaming import SubteamingConfig
 
 
 @dataclass
-class StafConfig:
+class StafConfig(LearnedMethodChecks):
     """Config of `method=staf` (group `method`)."""
 
     name: str = "staf"
@@ -52,17 +52,8 @@ class StafConfig:
     """Subteams, their goals, the regroup (subteaming.py); the settings the policy was trained with (`made_by`)."""
 
     def check(self, key: str = "method") -> None:
-        from stafpipe.learning.teachers import check_low_level, check_stop_gap
-
-        check_low_level(self.low_level, self.proportional_gain, key, self.stop_gap)
-        check_stop_gap(self.approach_cap_gap, f"{key}.approach_cap_gap")
+        self.check_low_level(key, self.stop_gap)
         self.subteaming.check(f"{key}.subteaming")
-
-    def check_run(self, sensing: Any, world: Any, key: str = "method") -> None:
-        """With the run's sensing: the policy's features clip what it senses at its own radius."""
-        from stafpipe.config.checks import check_sensing_radius
-
-        check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)
 
 
 class StafController(LearnedController):
