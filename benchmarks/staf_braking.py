@@ -6,7 +6,7 @@ For each map, STAF (the shipped policy, or `--checkpoint`) drives its episodes; 
 command for the same observation and plan targets is computed beside the network's. A robot within `--near` m of a
 wall (or of another robot) "under-brakes" when its command approaches that wall (robot) more than `--excess` m/s
 faster than the teacher's would. Prints one row per map: near-wall steps, of them under-braking, the same for robots,
-and contacts. A fit diagnostic for the low level (docs/staf.md), not a speed or success benchmark.
+and contacts. A fit diagnostic for the low level (docs/staf_planned.md), not a speed or success benchmark.
 """
 
 from __future__ import annotations

@@ -162,7 +162,7 @@ def test_sliding_teacher_caps_where_a_differential_drive_moves_not_only_where_it
     sc = load_named_scenario("corridor")
     worlds = Worlds([sc], SensingConfig(position_noise=0.0))
     worlds.reset([0])
-    bearing, heading, aim_dir, gap = -1.46, -2.2, 2.9, 0.05  # the seed-777 map-1 contact (docs/staf.md)
+    bearing, heading, aim_dir, gap = -1.46, -2.2, 2.9, 0.05  # the seed-777 map-1 contact (docs/staf_planned.md)
     worlds.pos[0, 0] = [15.0, 6.0]
     worlds.pos[0, 1] = worlds.pos[0, 0] + (0.4 + gap) * np.array([math.cos(bearing), math.sin(bearing)])
     worlds.heading[0, 0] = heading

@@ -1,4 +1,5 @@
-"""Moving obstacles and STAF (`method.avoid_movers`, docs/staf.md, "Moving obstacles"): neither STAF's plan nor its
+"""Moving obstacles and STAF (`method.avoid_movers`, docs/journal/2026-12-06-staf-planned-history.md, "Moving
+obstacles"): neither STAF's plan nor its
 network sees a mover's velocity, so a safety layer (controllers/orca.py `avoid_movers`) steps the robots a walker can
 reach out of its way, and leaves every other command as it was."""
 

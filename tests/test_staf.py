@@ -220,7 +220,7 @@ def test_drive_input_tells_the_network_each_robots_drive() -> None:
     state, per world; the network adds w_drive to z_i where the flag is 1, so the same state gives another action on
     each drive, and with the flag 0 the action is that of the same weights without the input."""
     from stafpipe.controllers.base import TeamInfo
-    from stafpipe.learning.adapters import StafAdapter
+    from stafpipe.learning.adapters import StafPlannedAdapter
     from stafpipe.learning.config import RewardConfig
 
     holo = scenario_with("corridor", "circle", 4)
@@ -228,7 +228,7 @@ def test_drive_input_tells_the_network_each_robots_drive() -> None:
         holo, spec=dataclasses.replace(holo.spec, robot=dataclasses.replace(holo.spec.robot, drive="diff_drive"))
     )
     cfg = PolicyConfig(hidden=8, drive_input=True)
-    adapter = StafAdapter(cfg, RewardConfig(), None, 2.0)
+    adapter = StafPlannedAdapter(cfg, RewardConfig(), None, 2.0)
     worlds = Worlds([holo, holo], SensingConfig())
     obs = worlds.reset([0, 0])
     path = np.array([[4.0, 6.0], [26.0, 6.0]])
@@ -486,7 +486,8 @@ def test_the_split_sends_first_a_subteam_no_waiting_robot_stands_in_front_of() -
     """A T of 6 facing +x cut into the bar (0, 2, 3) and the stem with robot 1 (1, 4, 5): the usual order (further
     along and nearer the path first) sends the stem first, straight into robot 2 of the waiting bar; `unblock` sends
     the bar first, and with it off the usual order stands. (The ids and positions of a failing episode on a generated
-    map, docs/staf.md, on the path as it was then: clipped at its start, where robots 4 and 5 stand behind it; on the
+    map, docs/staf_planned.md, on the path as it was then: clipped at its start, where robots 4 and 5 stand behind it;
+    on the
     extended path their progress is below 0 and the usual order already sends the bar first.)"""
     sc = load_named_scenario("corridor")
     pos = np.array([[3.2, 7.5], [3.1, 6.3], [3.3, 5.7], [3.0, 4.6], [2.1, 6.0], [1.1, 6.0]])

@@ -50,7 +50,8 @@ class WorldConfig:
     start_kick: float = 0.0
     """A disturbance for training (m): in an episode's first step each robot is carried, on top of its command, by up
     to this far in a random direction (its own seeded stream; contacts apply), and keeps only its commanded velocity
-    afterwards. 0: none. An earlier simulator did this by accident (docs/staf.md, "Eight seeds")."""
+    afterwards. 0: none. An earlier simulator did this by accident (the STAF-planned journal (docs/staf_planned.md),
+    "Eight seeds")."""
     heading_spread_deg: float = 0.0
     """Each episode turns the start formation about its centre by an angle drawn uniformly from +-this (degrees); a
     draw that puts a robot on an obstacle is redrawn (10 tries, then no turn). Goals stay where the scenario has

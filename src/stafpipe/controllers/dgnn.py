@@ -37,12 +37,13 @@ class DGNNConfig(LearnedMethodChecks):
     """low_level other than learned: the step's gain (1/s)."""
     approach_cap: bool = False
     """The safety layer of `method=staf_planned`'s `approach_cap` (approach speed capped near robots and obstacles);
-    off, as DGNN's paper acts (docs/staf.md, "A safety layer")."""
+    off, as DGNN's paper acts (the STAF-planned journal (docs/staf_planned.md), "A safety layer")."""
     approach_cap_gap: float = 0.02
     """approach_cap: the gap (m) it brakes to."""
     avoid_movers: bool = True
     """Moving obstacles avoided by the safety layer `method=staf_planned` has (controllers/orca.py `avoid_movers`), so
-    that the two learned methods are compared alike; no effect on a map without movers (docs/staf.md, "Moving
+    that the two learned methods are compared alike; no effect on a map without movers
+    (the STAF-planned journal (docs/staf_planned.md), "Moving
     obstacles")."""
 
     def check(self, key: str = "method") -> None:

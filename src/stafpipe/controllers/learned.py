@@ -48,7 +48,8 @@ PLAN_SAFEGUARDS = (
     "track_progress",
 )
 """Plan settings that only keep targets from crossing, crowding, running into robots already home or leaving the world
-(docs/staf.md): a policy trained without them runs with them, so they are not compared with its training record."""
+(docs/staf_planned.md): a policy trained without them runs with them, so they are not compared with its training
+record."""
 
 
 def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[Any, Any]]:
@@ -86,7 +87,8 @@ class LearnedController(Controller):
         self.teacher = getattr(cfg, "low_level", "learned")  # `learned`, or a hand-made low level (teachers.py)
         self._check_made_by(cfg.checkpoint or f"the shipped {cfg.name} policy", self.made_by)
         # frozen actions (the weights never change here): the checkpoint's, then those of `method.ensemble`, more
-        # training runs of the same network whose action means are averaged (docs/staf.md, "Several training runs
+        # training runs of the same network whose action means are averaged
+        # (the STAF-planned journal (docs/staf_planned.md), "Several training runs
         # averaged")
         paths = ensemble_paths(cfg.checkpoint, getattr(cfg, "ensemble", []), cfg.name)
         self._acts = [self.policy.frozen_act()]
@@ -202,7 +204,7 @@ class LearnedController(Controller):
 
     def _approach_capped(self, out: np.ndarray, obs: Observation) -> np.ndarray:
         """`method.approach_cap`: the classical methods' approach cap on the commands of every world at once, and on a
-        differential drive's motion from them (docs/staf.md, "A safety layer")."""
+        differential drive's motion from them (the STAF-planned journal (docs/staf_planned.md), "A safety layer")."""
         robot = self.adapter.teams[0].scenario.spec.robot  # the worlds of a batch share one robot
         gap = self.cfg.approach_cap_gap
         out = limit_approach(out, obs, robot.radius, AVOID_DISTANCE, AVOID_GAIN, gap)
@@ -212,7 +214,8 @@ class LearnedController(Controller):
 
     def _avoid_movers(self, out: np.ndarray, obs: Observation, active: np.ndarray) -> None:
         """`method.avoid_movers`: in the worlds with moving obstacles, the commands with the movers avoided
-        (`orca.avoid_movers`; docs/staf.md, "Moving obstacles"). Worlds without any are left as they are."""
+        (`orca.avoid_movers`; the STAF-planned journal (docs/staf_planned.md), "Moving obstacles"). Worlds without any
+        are left as they are."""
         for w in np.flatnonzero(active).tolist():
             spec = self.adapter.teams[w].scenario.spec
             if spec.moving_obstacles:

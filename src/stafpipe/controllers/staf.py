@@ -3,7 +3,7 @@ driven by a hand-written plan. The plan (controllers/staf_plan.py: deep graph cu
 subteams in the team's formation type passing one after another, regroup into the original formation) gives every
 robot its target; the trained intermediate GNN + low-level policy (learning/staf_net.py, `stafpipe train-ppo
 train_ppo.method=staf_planned`) drives it there, adapting the formation to the passage and keeping clear of robots and
-walls. Driven through `learning/adapters.py:StafAdapter`, as in training."""
+walls. Driven through `learning/adapters.py:StafPlannedAdapter`, as in training."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ class StafMethodConfig(LearnedMethodChecks):
     the checkpoint alone (`checkpoint=shipped:staf_planned ensemble=[]` is the shipped first run by itself). Each member
     is checked as the checkpoint is (settings, `allow_mismatch`)."""
     low_level: str = "learned"
-    """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf.md,
+    """`learned` (phi + psi, the trained policy); or no learning below the plan (the ablation of docs/staf_planned.md,
     `staf_levels`): `proportional` (each robot steps towards its target at min(1, gain x distance) of top speed),
     `avoiding` (the same with the classical methods' approach cap near robots and obstacles), `sliding` (`avoiding`
     aiming no closer to the closest obstacle than a margin) or `orca` (the same step as ORCA's preferred velocity);
@@ -49,13 +49,15 @@ class StafMethodConfig(LearnedMethodChecks):
     """A safety layer on the commands, not in STAF's paper (whose action is psi's alone): towards any robot or obstacle
     closer than 0.35 m the approach speed is capped at 2 x (gap - `approach_cap_gap`), and on a differential drive the
     motion the drive makes from the command too (the classical methods' cap, controllers/base.py `limit_approach`,
-    `forward_capped`). Any low level, learned or hand-made, gets it alike (docs/staf.md, "A safety layer")."""
+    `forward_capped`). Any low level, learned or hand-made, gets it alike
+    (the STAF-planned journal (docs/staf_planned.md), "A safety layer")."""
     approach_cap_gap: float = 0.02
     """approach_cap: the gap (m) it brakes to."""
     avoid_movers: bool = True
     """Moving obstacles (a walking human) avoided by a safety layer on the commands, ORCA's half-planes of the movers
     alone (controllers/orca.py `avoid_movers`): neither the plan nor the network sees a mover's velocity. Not in the
-    STAF paper, which has no moving obstacles; no effect on a map without them (docs/staf.md, "Moving obstacles")."""
+    STAF paper, which has no moving obstacles; no effect on a map without them
+    (the STAF-planned journal (docs/staf_planned.md), "Moving obstacles")."""
     plan: PlanConfig = field(default_factory=PlanConfig)
     """Subteams, sequencing and regroup; keep the settings the policy was trained with (its `made_by` records them)."""
 

@@ -6,7 +6,7 @@ subteams fit, STAF Sec. 7). Each subteam takes the team's formation type with it
 within the same type"), and the subteams pass the narrow part one after another. Once every robot has passed into
 space large enough for the full team, every robot's target becomes its own goal slot (Sec. 3, low level): the regroup.
 The plan gives targets, subteam labels and the pair distances d_ij of R^adp; the learned low level drives the robots.
-The same numpy code runs in PPO training and in `method=staf_planned`. Decisions: docs/staf.md.
+The same numpy code runs in PPO training and in `method=staf_planned`. Decisions: docs/staf_planned.md.
 """
 
 from __future__ import annotations

@@ -210,7 +210,7 @@ def balance_sizes(labels: np.ndarray, pos: np.ndarray, m: int) -> np.ndarray:
 
     Why: STAF's cut loss has a balance term (Eq. (1), Fig. 7) but the shipped network's argmax at m = 4 leaves a subteam
     empty and the repair gives it one robot (docs/method.md): a one-robot "line" cannot keep a formation. Used by STAF's
-    plan (`plan.balance`); docs/staf.md.
+    plan (`plan.balance`); docs/staf_planned.md.
     """
     labels = np.asarray(labels, dtype=int)
     n, m = len(labels), min(m, len(labels))

@@ -155,8 +155,8 @@ class SubteamAdapter(Adapter):
         return self.plans[w].drain_events()
 
 
-class StafAdapter(SubteamAdapter):
-    """STAF (Sec. 3, App. B): the plan (deep graph cut, subteams, regroup;
+class StafPlannedAdapter(SubteamAdapter):
+    """STAF-planned (ours; STAF Sec. 3, App. B): the plan (deep graph cut, subteams, regroup;
     controllers/staf_plan.py) gives each robot its target; the network sees the robot-frame states of
     `features.staf_features`; the reward adds R^adp and the proximity penalty (`staf_penalties`)."""
 
@@ -212,7 +212,8 @@ def staf_penalties(
 ) -> np.ndarray:
     """(B, n) STAF's formation and proximity terms of this step. R^adp (STAF Sec. 3) over the robot's subteam mates,
     -lambda |d_ij - p_ij| - (1 - lambda) q_ij with d_ij from the plan's formation, averaged over the mates so that
-    subteams of any size weigh alike; proximity: linear in how far a gap is below `safe_distance` (docs/staf.md)."""
+    subteams of any size weigh alike; proximity: linear in how far a gap is below `safe_distance`
+    (docs/staf_planned.md)."""
     n = pos.shape[1]
     expected = np.stack([p.expected for p in plans])
     same = np.stack([p.same for p in plans]) & ~np.eye(n, dtype=bool)
@@ -228,7 +229,7 @@ def staf_penalties(
 
 ADAPTERS: dict[str, str] = {
     "dgnn": "stafpipe.learning.adapters:DGNNAdapter",
-    "staf_planned": "stafpipe.learning.adapters:StafAdapter",
+    "staf_planned": "stafpipe.learning.adapters:StafPlannedAdapter",
     "staf": "stafpipe.methods.staf.adapter:StafAdapter",
 }
 """Learned methods by name (`train_ppo.method`, the `method` of a policy checkpoint): where each adapter lives, imported

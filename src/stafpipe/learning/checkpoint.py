@@ -32,7 +32,8 @@ SHIPPED = "shipped:"
 
 SHIPPED_PARTNERS: dict[str, tuple[str, ...]] = {"staf_planned": ("shipped:staf_planned_seed1",)}
 """The shipped policy of a method acts with these other training runs of its network averaged in (`method.ensemble`
-left unset and `method.checkpoint` empty): STAF's two runs (how much better than one: docs/staf.md, "The pair as
+left unset and `method.checkpoint` empty): STAF's two runs (how much better than one:
+the STAF-planned journal (docs/staf_planned.md), "The pair as
 the default")."""
 
 

@@ -58,14 +58,15 @@ class PolicyConfig:
     init_log_std: float = -0.5
     prior_gain: float = 0.0
     """method=staf_planned: 0 = a_i = psi(f_i) as printed; > 0 adds a proportional step towards the target (gain x
-    target vector, at most unit length) to psi's output, which then learns a residual (docs/staf.md)."""
+    target vector, at most unit length) to psi's output, which then learns a residual (docs/staf_planned.md)."""
     message: str = "relu"
     """method=staf_planned: the intermediate GNN's neighbour message, `linear` (as printed, Sec. 3) or `relu`
     (learning/staf_net.py)."""
     drive_input: bool = False
     """method=staf_planned: true appends to each robot's own state a flag of its drive (1 a differential drive, 0
     holonomic; a robot knows its own drive), so that one network can act differently on each where their states look
-    the same (the `sliding` teacher's differential-drive cap, docs/staf.md); false: the state as printed (Sec. 3)."""
+    the same (the `sliding` teacher's differential-drive cap, docs/staf_planned.md); false: the state as printed (Sec.
+    3)."""
 
 
 @dataclass
@@ -112,7 +113,8 @@ class ImitationConfig:
     privileged: bool = False
     """method=staf_planned with `plan.adapt=nominal`: true, the teacher drives to the targets of a shadow plan with the
     geometric adaptation, which the network never sees (it must infer the shrink from what it senses; measured
-    worse, docs/staf.md "Learned adaptation"); false, the teacher drives to the plan's own nominal targets, as the
+    worse, the STAF-planned journal (docs/staf_planned.md) "Learned adaptation"); false, the teacher drives to the
+    plan's own nominal targets, as the
     network sees them, and deforms the formation only by braking for walls and robots."""
     lr: float = 1e-3
     batch: int = 256

@@ -210,7 +210,7 @@ def imitate(
     visits, labelled by the teacher, all samples kept. With `imitation.privileged` the teacher may see more than the
     network (`Adapter.teacher_aim`: for STAF with `plan.adapt=nominal`, the targets of the geometrically adapted plan,
     while the network sees the nominal ones and must infer the adaptation from what it senses). The teacher is then
-    gone: PPO trains the network alone, a_i = psi(f_i) as printed (docs/staf.md)."""
+    gone: PPO trains the network alone, a_i = psi(f_i) as printed (docs/staf_planned.md)."""
     im = tc.imitation
     rng = np.random.default_rng([seed, 7])
     opt = torch.optim.Adam(policy.parameters(), lr=im.lr)

@@ -7,7 +7,8 @@ level psi: two linear layers with a ReLU, f_i -> a_i = [v_x, v_y] (Sec. 3), the 
 
 `message=linear` is phi as printed: the whole policy is then a one-hidden-layer network of s_i and sum_j (s_j - s_i),
 which cannot tell one close neighbour from several far ones. `message=relu` (default) passes each neighbour's
-W^f (z_j - z_i) + b through a ReLU before the sum, so a close robot can be told from the rest: docs/staf.md compares
+W^f (z_j - z_i) + b through a ReLU before the sum, so a close robot can be told from the rest: docs/staf_planned.md
+compares
 the two.
 """
 
@@ -68,7 +69,7 @@ class StafPolicy(PolicyNet):
         """W^f (z_j - z_i) for each pair, diff = s_j - s_i (.., 9): z_j - z_i = W^z (s_j - s_i) (linear, so the bias
         cancels), and W^f W^z is one 9 x hidden map, so each pair costs a 9-wide product instead of a 9- and a
         hidden-wide one (STAF Sec. 3's phi, the same function to float rounding; the pairs are most of the network's
-        work: docs/staf.md, printed vs used, row 3). `pair_map`: that map computed beforehand (`frozen_act`)."""
+        work: docs/staf_planned.md, printed vs used, row 3). `pair_map`: that map computed beforehand (`frozen_act`)."""
         msg = diff @ (self._pair_map() if pair_map is None else pair_map)
         if self.cfg.message == "relu":
             msg = torch.relu(msg + self.b_msg)
@@ -89,7 +90,7 @@ class StafPolicy(PolicyNet):
 
     def _mean(self, f: torch.Tensor, own: torch.Tensor) -> torch.Tensor:
         mean = self.psi(f)
-        if self.cfg.prior_gain > 0:  # residual on a proportional step to the target (docs/staf.md, decision 5)
+        if self.cfg.prior_gain > 0:  # residual on a proportional step to the target (docs/staf_planned.md, decision 5)
             mean = mean + proportional_step(own, self.cfg.prior_gain)
         return mean
 

@@ -1,6 +1,6 @@
 """Hand-made low levels: the imitation teachers of the warm start (learning/ppo.py:imitate) and, in
 `method=staf_planned` (`method.low_level`), the method with its learned low level removed, for the ablation of
-docs/staf.md.
+docs/staf_planned.md.
 
 - `proportional`: a step towards the target at min(1, gain x distance) of top speed (the step of the residual prior,
   staf_net.proportional_step).
@@ -75,7 +75,7 @@ def _near_offsets(reach: float, shape: tuple[int, ...], rng: np.random.Generator
 def near_wall_copy(obs: Observation, radius: float, rng: np.random.Generator) -> Observation:
     """`obs` with every robot's closest obstacle point replaced by one at a uniform bearing, 0 to `NEAR_WALL_GAP`
     from its surface: states in which the teacher brakes for a wall ahead, beside or behind, which the training maps
-    hold too few of for the network to learn the braking (docs/staf.md)."""
+    hold too few of for the network to learn the braking (docs/staf_planned.md)."""
     gap, vec = _near_offsets(radius, obs.obstacle_distance.shape, rng)
     return obs._replace(obstacle=vec, obstacle_distance=gap)
 
@@ -108,7 +108,7 @@ def teacher_actions(
     """(B, n, 2) actions in the policies' action space (robot frame, in units of top speed) towards the world-frame
     vectors `to_aim` (B, n, 2) from each robot to the point it should reach, for the batched observation `obs` of
     robots with this `drive` (scenario robot.drive). `stop_gap`: the gap (m) the approach cap brakes to (the classical
-    methods' 0.02 m by default; a larger one keeps an imitator's own errors short of contact, docs/staf.md)."""
+    methods' 0.02 m by default; a larger one keeps an imitator's own errors short of contact, docs/staf_planned.md)."""
     if kind == "sliding":
         to_aim = off_the_wall(to_aim, obs)
     length = np.linalg.norm(to_aim, axis=-1, keepdims=True)

@@ -1,5 +1,5 @@
 """Variants of one method side by side (`eval.label`): SR, collisions per episode and CFI(0.5) per map, mean and 95 %
-CI, one bar per variant: the figure of the `staf_levels` ablation (docs/staf.md)."""
+CI, one bar per variant: the figure of the `staf_levels` ablation (docs/staf_planned.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""STAF's hand-written decisions, and only those the paper states (docs/staf.md, "Every rule and its sentence"):
+"""STAF's hand-written decisions, and only those the paper states (the STAF-planned journal (docs/staf_planned.md),
+"Every rule and its sentence"):
 
 1. When to cut and into how many subteams (Sec. 7, third limitation): the smallest m such that a subteam of ceil(n/m)
    robots in the team's formation type, at its smallest spacing, fits the narrowest passage of the map (read from the
@@ -16,7 +17,7 @@
 
 Everything else (how a subteam keeps, shrinks or stretches its formation, how robots avoid each other and the
 walls) is the learned policy's. The goal a robot's network sees is carried along the map's route (`carried_goal`:
-ours, not the paper's, whose goals are in sight across open floor; docs/staf.md).
+ours, not the paper's, whose goals are in sight across open floor; docs/staf_planned.md).
 """
 
 from __future__ import annotations
