@@ -3,6 +3,7 @@ pipelines."""
 
 import math
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -10,37 +11,92 @@ import yaml
 from conftest import job_dirs
 from stafpipe.errors import StafpipeError
 from stafpipe.pipeline import load_pipeline, run_pipeline
+from stafpipe.plots.staf_tables import mean_ci
 from stafpipe.report.claims_staf import staf_claims
-from stafpipe.report.evidence import gather
+from stafpipe.report.evidence import column_number, gather, wilson
 from stafpipe.report.render import all_claims, judge_all
-from stafpipe.report.verdicts import FAILS, HOLDS, MISSING, PARTLY, Criterion, Number
+from stafpipe.report.verdicts import FAILS, HOLDS, MISSING, ORDER, PARTLY, Criterion, Number
 
 
 @pytest.mark.parametrize(
-    ("criterion", "below", "at", "far"),
+    ("criterion", "holds", "partly", "fails"),
     [
-        (Criterion("at_least", 95, 10), 94.9, 95.0, 84.9),
-        (Criterion("at_most", 0, 1), 0.01, 0.0, 1.01),
-        (Criterion("near", 40, 15), 55.1, 55.0, 70.1),
+        # at least 95: the whole interval above it; only the value; below it
+        (Criterion("at_least", 95), Number(96.0, 1.0), Number(96.0, 2.0), Number(94.9, 10.0)),
+        (Criterion("at_most", 0.1), Number(0.05, 0.05), Number(0.05, 0.2), Number(0.2, 1.0)),
+        (Criterion("near", 40, 15), Number(50.0, 4.0), Number(54.0, 4.0), Number(56.0, 20.0)),
     ],
 )
-def test_a_verdict_changes_when_its_number_crosses_the_criterion(criterion, below, at, far) -> None:
-    assert criterion.verdict(Number(at)) == HOLDS
-    assert criterion.verdict(Number(below)) == PARTLY
-    assert criterion.verdict(Number(far)) == FAILS
+def test_holds_needs_the_whole_interval_on_the_claims_side(criterion, holds, partly, fails) -> None:
+    assert criterion.verdict(holds) == HOLDS
+    assert criterion.verdict(partly) == PARTLY
+    assert criterion.verdict(fails) == FAILS
     assert criterion.verdict(Number(math.nan)) == MISSING
 
 
+def test_a_noisy_result_below_the_bar_does_not_hold() -> None:
+    """The old rule (value + CI >= bar) passed a mean of 89 % against 95 % on a CI of 17.9 points."""
+    assert Criterion("at_least", 95).verdict(Number(89.0, 17.9, 3)) == FAILS
+    assert Criterion("at_most", 0.1).verdict(Number(0.3, 0.5, 3)) == FAILS
+    # a single sample has no interval: it can never hold, however good its value
+    assert Criterion("at_least", 95).verdict(Number(100.0, math.nan, 1)) == PARTLY
+
+
+@pytest.mark.parametrize("kind", ["at_least", "at_most", "near", "above", "below"])
+def test_a_wider_interval_never_strengthens_a_verdict(kind) -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(400):
+        target, value = rng.uniform(-2, 2, 2)
+        narrow, extra = rng.uniform(0, 1.5, 2)
+        other = Number(target, float(rng.uniform(0, 1)))
+        criterion = Criterion.than(kind, other) if kind in ("above", "below") else Criterion(kind, target, 0.5)
+        tight, wide = Number(value, narrow), Number(value, narrow + extra)
+        assert ORDER[criterion.verdict(wide)] <= ORDER[criterion.verdict(tight)], (kind, target, value, narrow)
+        # the other number's interval widening never helps a comparison either
+        if kind in ("above", "below"):
+            wider_other = Criterion.than(kind, Number(target, other.ci + extra))
+            assert ORDER[wider_other.verdict(tight)] <= ORDER[criterion.verdict(tight)]
+
+
+def test_ties_do_not_hold_and_rounding_decides_nothing() -> None:
+    both_perfect = Number(100.0, 0.0, 50)
+    assert Criterion.than("above", both_perfect).verdict(both_perfect) == FAILS
+    assert Criterion.than("below", both_perfect).verdict(both_perfect) == FAILS
+    # |40 - 70| in floating point is 30.000000000000014: inside a 30-point band, as the arithmetic intends
+    assert Criterion("near", 40.0, 30.0).verdict(Number(70.0)) == HOLDS
+    assert Criterion("at_least", 0.3).verdict(Number(0.1 + 0.2)) == HOLDS  # 0.30000000000000004
+
+
 def test_comparisons_need_the_numbers_apart_beyond_both_cis() -> None:
-    above = Criterion("above", 50.0, target_ci=2.0)
+    above = Criterion.than("above", Number(50.0, 2.0))
     assert above.verdict(Number(53.0, 0.5)) == HOLDS
     assert above.verdict(Number(52.0, 0.5)) == PARTLY  # inside the other's CI
     assert above.verdict(Number(49.0)) == FAILS
-    below = Criterion("below", 1.0, target_ci=0.1)
+    assert Criterion.than("above", Number(50.0, math.nan, 1)).verdict(Number(90.0, 0.1)) == PARTLY  # unknown CI
+    below = Criterion.than("below", Number(1.0, 0.1))
     assert below.verdict(Number(0.8, 0.05)) == HOLDS and below.verdict(Number(0.95)) == PARTLY
     assert below.verdict(Number(1.2)) == FAILS
     with pytest.raises(ValueError, match="kind"):
         Criterion("about", 1.0)
+
+
+def test_success_rates_get_wilson_intervals() -> None:
+    """50 perfect episodes do not show SR >= 95 % at 95 % confidence (Wilson's lower end is 92.9 %); 200 do."""
+    perfect = column_number(pd.DataFrame({"sr": [1.0] * 50}), "sr", 100, " %")
+    assert perfect.value == 100.0 and perfect.lower == pytest.approx(100 * 50 / (50 + 1.959964**2), abs=1e-3)
+    assert Criterion("at_least", 95).verdict(perfect) == PARTLY
+    assert Criterion("at_least", 95).verdict(column_number(pd.DataFrame({"sr": [1.0] * 200}), "sr", 100)) == HOLDS
+    low, high = wilson(0.5, 100)
+    assert low == pytest.approx(0.4038, abs=1e-3) and high == pytest.approx(0.5962, abs=1e-3)
+
+
+def test_other_means_take_the_wider_of_t_and_bootstrap() -> None:
+    values = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 5.0])
+    t_half = mean_ci(pd.Series(values))[1]
+    number = column_number(pd.DataFrame({"x": values}), "x")
+    assert number.ci >= t_half and number.n == 6
+    assert column_number(pd.DataFrame({"x": [2.0] * 5}), "x").ci == 0.0
+    assert math.isnan(column_number(pd.DataFrame({"x": [2.0]}), "x").ci)
 
 
 def _eval_run(root, name, rows, faults=()) -> str:
@@ -68,14 +124,17 @@ def _episodes(method, formation, sr, n=10, episodes=5):
 
 def test_a_claim_is_judged_from_the_runs_that_match_it_and_flips_with_its_number(tmp_path) -> None:
     claim = next(c for c in staf_claims() if c.statement == "STAF-planned (ours) success rate, wedge")
-    good = _eval_run(tmp_path, "good", _episodes("staf_planned", "wedge", 1.0))
+    good = _eval_run(tmp_path, "good", _episodes("staf_planned", "wedge", 1.0, episodes=80))
     other = _eval_run(tmp_path, "other", _episodes("staf_planned", "line", 0.0))  # another cell: must not count
     faulty = _eval_run(tmp_path, "faulty", _episodes("staf_planned", "wedge", 0.0), [{"kind": "stuck", "robot": 3}])
     [row] = judge_all(gather(list(map(type(tmp_path), [good, other, faulty]))), [claim])
-    assert row.verdict == HOLDS and row.measured.ours.value == 100.0 and row.measured.ours.n == 5
+    assert row.verdict == HOLDS and row.measured.ours.value == 100.0 and row.measured.ours.n == 80
+    _eval_run(tmp_path, "few", _episodes("staf_planned", "wedge", 1.0, episodes=5))  # perfect, but 5 show little
+    [row] = judge_all(gather([tmp_path / "few"]), [claim])
+    assert row.verdict == PARTLY and row.measured.ours.value == 100.0
     _eval_run(tmp_path, "bad", _episodes("staf_planned", "wedge", 0.9))
     [row] = judge_all(gather([tmp_path / "bad"]), [claim])
-    assert row.verdict == PARTLY and row.measured.ours.value == pytest.approx(90.0)
+    assert row.verdict == FAILS and row.measured.ours.value == pytest.approx(90.0)
     [row] = judge_all(gather([tmp_path / "other"]), [claim])
     assert row.verdict == MISSING
 

@@ -6,7 +6,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from stafpipe.report.evidence import Evidence
+from stafpipe.report.evidence import Evidence, wilson
 from stafpipe.report.verdicts import Criterion, Number
 
 
@@ -45,5 +45,8 @@ def judge(claim: Claim, evidence: Evidence) -> Row:
 
 
 def fraction(hits: int, total: int) -> Number:
-    """hits out of total, in per cent (NaN when nothing was measured)."""
-    return Number(100.0 * hits / total if total else math.nan, 0.0, total, " %")
+    """hits out of total, in per cent, with Wilson's 95 % interval (NaN when nothing was measured)."""
+    if not total:
+        return Number(math.nan)
+    low, high = wilson(hits / total, total)
+    return Number(100.0 * hits / total, math.nan, total, " %", 100 * low, 100 * high)

@@ -56,7 +56,7 @@ def _table1_claims() -> list[Claim]:
                     f"{NAMES[method]} success rate, {f}",
                     f"{sr:.0f} %",
                     "staf_table1",
-                    _mean("sr", cell(method, f), Criterion("at_least", sr - 5, 10)),
+                    _mean("sr", cell(method, f), Criterion("at_least", sr - 5)),
                 )
             )
         lf_sr = PAPER_TABLE1[("lf", f)][0]
@@ -117,7 +117,7 @@ def _table1_claims() -> list[Claim]:
 def _staf_cfi(formation: str, paper: float) -> Callable[[Evidence], Measured]:
     return lambda ev: Measured(
         ev.number("cfi_0.5", 100, " %", **cell(PLANNED, formation)),
-        Criterion("at_least", paper - 5, 10),
+        Criterion("at_least", paper - 5),
         _cfi_note(ev, PLANNED, formation),
     )
 
@@ -127,14 +127,14 @@ def _compare(column: str, ours: dict[str, Any], other: dict[str, Any], name: str
 
 
 def _lf_stuck(ev: Evidence) -> Measured:
-    srs = [ev.number("sr", 100, " %", **cell("lf", f)).value for f in FORMATIONS]
-    worst = max((s for s in srs if not math.isnan(s)), default=math.nan)
-    return Measured(Number(worst, 0, 0, " %"), Criterion("at_most", 90, 9.9), "the largest of L&F's three SRs")
+    srs = [x for f in FORMATIONS if not math.isnan((x := ev.number("sr", 100, " %", **cell("lf", f))).value)]
+    worst = max(srs, key=lambda x: x.value, default=Number(math.nan))
+    return Measured(worst, Criterion("at_most", 90), "the largest of L&F's three SRs")
 
 
 def _above(ev: Evidence, column: str, ours: dict[str, Any], other: dict[str, Any], name: str) -> Measured:
     a, b = ev.number(column, 100, " %", **ours), ev.number(column, 100, " %", **other)
-    return Measured(a, Criterion("above", b.value, target_ci=b.half), f"{name}: {b.text()}")
+    return Measured(a, Criterion.than("above", b), f"{name}: {b.text()}")
 
 
 def _staf_cfi_above_both(ev: Evidence) -> Measured:
@@ -147,9 +147,9 @@ def _staf_cfi_above_both(ev: Evidence) -> Measured:
             if any(math.isnan(x.value) for x in (ours, *others)):
                 continue
             total += 1
-            hits += all(Criterion("above", o.value, target_ci=o.half).verdict(ours) == HOLDS for o in others)
+            hits += all(Criterion.than("above", o).verdict(ours) == HOLDS for o in others)
     return Measured(
-        Number(hits if total else math.nan, 0, total), Criterion("at_least", 9, 3), "cells above both outside the CIs"
+        Number(hits if total else math.nan, 0, total), Criterion("at_least", 9), "cells above both outside the CIs"
     )
 
 
@@ -161,11 +161,12 @@ def _lf_fastest(ev: Evidence) -> Measured:
         if math.isnan(lf.value) or all(math.isnan(r.value) for r in rivals):
             continue
         total += 1
-        hits += all(math.isnan(r.value) or lf.value < r.value for r in rivals)
+        hits += all(math.isnan(r.value) or Criterion.than("below", r).verdict(lf) == HOLDS for r in rivals)
     return Measured(
         Number(hits if total else math.nan, 0, total),
-        Criterion("at_least", 3, 1),
-        "formations where L&F's TT of arrivals is below both others' TT (L&F's whole team never arrives)",
+        Criterion("at_least", 3),
+        "formations where L&F's TT of arrivals is below both others' TT outside both CIs "
+        "(L&F's whole team never arrives)",
     )
 
 
@@ -176,10 +177,10 @@ def _table2_and_fig4() -> list[Claim]:
         def both(ev: Evidence, f: str = f) -> Measured:
             rows = ev.select(**cell(PLANNED, f))
             if rows.empty or "sub2_sr" not in rows:
-                return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+                return Measured(Number(math.nan), Criterion("at_least", 95))
             subs = [column_number(rows, c, 100, " %") for c in ("sub1_sr", "sub2_sr")]
             return Measured(
-                lowest(subs), Criterion("at_least", 95, 10), f"subteams {subs[0].value:.1f} / {subs[1].value:.1f} %"
+                lowest(subs), Criterion("at_least", 95), f"subteams {subs[0].value:.1f} / {subs[1].value:.1f} %"
             )
 
         claims.append(Claim("STAF", "Table 2", f"both subteams succeed, {f}", "100 % each", "staf_table1", both))
@@ -187,7 +188,7 @@ def _table2_and_fig4() -> list[Claim]:
     def two_subteams(ev: Evidence) -> Measured:
         rows = pd.concat([ev.select(**cell(PLANNED, f)) for f in FORMATIONS])
         hits = int((rows["subteams_max"] == 2).sum()) if not rows.empty else 0
-        return Measured(fraction(hits, len(rows)), Criterion("at_least", 100, 10), "episodes with exactly two subteams")
+        return Measured(fraction(hits, len(rows)), Criterion("at_least", 100), "episodes with exactly two subteams")
 
     claims.append(
         Claim("STAF", "Fig. 4", "the team divides into two subteams (red, blue)", "2", "staf_table1", two_subteams)
@@ -207,9 +208,7 @@ def _fig7_claims() -> list[Claim]:
     def vs_full(variant: str, column: str, kind: str, effect: float) -> Callable[[Evidence], Measured]:
         def measure(ev: Evidence) -> Measured:
             ours, full = _loss_terms(ev, variant, column)
-            return Measured(
-                ours, Criterion(kind, full.value, target_ci=full.half, min_effect=effect), f"full loss: {full.text(3)}"
-            )
+            return Measured(ours, Criterion.than(kind, full, min_effect=effect), f"full loss: {full.text(3)}")
 
         return measure
 
@@ -221,13 +220,13 @@ def _fig7_claims() -> list[Claim]:
             "Fig. 7(a)",
             "balance alone splits 12 robots evenly into 3 (imbalance, robots)",
             "even",
-            absolute("a_balance_only", "imbalance", Criterion("at_most", 1, 1)),
+            absolute("a_balance_only", "imbalance", Criterion("at_most", 1)),
         ),
         (
             "Fig. 7(b)",
             "adjacency alone puts every robot in one subteam (subteams used)",
             "1",
-            absolute("b_adjacency_only", "subteams_used", Criterion("at_most", 1.1, 0.9)),
+            absolute("b_adjacency_only", "subteams_used", Criterion("at_most", 1.1)),
         ),
         (
             "Fig. 7(c)",
@@ -263,7 +262,7 @@ def _team_size_claims() -> list[Claim]:
 
     def all_sizes(ev: Evidence) -> Measured:
         worst = lowest([ev.number("sr", 100, " %", **circle(n)) for n in (4, 6, 7, 8)])
-        return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR over teams of 4, 6, 7, 8")
+        return Measured(worst, Criterion("at_least", 95), "the lowest SR over teams of 4, 6, 7, 8")
 
     return [
         Claim(
@@ -272,7 +271,7 @@ def _team_size_claims() -> list[Claim]:
             "CFI of 4 robots at sigma < 0.03",
             "87 %",
             "staf_team_size",
-            _mean("cfi_0.01", circle(4), Criterion("at_least", 87, 10), "sigma 0.01"),
+            _mean("cfi_0.01", circle(4), Criterion("at_least", 87), "sigma 0.01"),
         ),
         Claim(
             "STAF",
@@ -280,7 +279,7 @@ def _team_size_claims() -> list[Claim]:
             "CFI of 8 robots at sigma < 0.03",
             "at least 80 %",
             "staf_team_size",
-            _mean("cfi_0.01", circle(8), Criterion("at_least", 80, 10), "sigma 0.01"),
+            _mean("cfi_0.01", circle(8), Criterion("at_least", 80), "sigma 0.01"),
         ),
         Claim(
             "STAF", "Fig. 8(a-d)", "teams of 4, 6, 7 and 8 robots pass the corridor", "all", "staf_team_size", all_sizes
@@ -309,7 +308,7 @@ def _graph_cut_claims() -> list[Claim]:
             f"a team of 10 divides into {m} balanced subteams (imbalance, robots; circle, wedge, line together)",
             "handled",
             "staf_subteam_count",
-            _study("subteam_count", "imbalance", Criterion("at_most", 1, 1), m=m),
+            _study("subteam_count", "imbalance", Criterion("at_most", 1), m=m),
         )
         for m in (2, 3, 4)
     ]
@@ -322,7 +321,7 @@ def _graph_cut_claims() -> list[Claim]:
                 "(adjusted Rand index to the noise-free cut)",
                 "consistent",
                 "staf_noise",
-                _study("noise", "ari", Criterion("at_least", 0.9, 0.2), sigma=sigma),
+                _study("noise", "ari", Criterion("at_least", 0.9), sigma=sigma),
             )
         )
     return claims
@@ -344,7 +343,7 @@ def _levels(ev: Evidence) -> dict[str, dict[str, pd.DataFrame]]:
 def _beats(b: pd.DataFrame, a: pd.DataFrame, column: str, higher: bool) -> bool:
     """b's mean of `column` above (`higher`) or below a's, outside both CIs."""
     ours, theirs = column_number(b, column), column_number(a, column)
-    return Criterion("above" if higher else "below", theirs.value, target_ci=theirs.half).verdict(ours) == HOLDS
+    return Criterion.than("above" if higher else "below", theirs).verdict(ours) == HOLDS
 
 
 def _learning_claims() -> list[Claim]:
@@ -355,7 +354,7 @@ def _learning_claims() -> list[Claim]:
         )
         return Measured(
             Number(hits if maps else math.nan, 0, len(maps)),
-            Criterion("at_least", 1, 0),
+            Criterion("at_least", 1),
             "maps where (b) beats (a) outside the CIs in SR or collisions",
         )
 
@@ -364,19 +363,19 @@ def _learning_claims() -> list[Claim]:
         hits = sum(_beats(v["a"], v["b"], "sr", True) for v in maps.values())
         return Measured(
             Number(hits if maps else math.nan, 0, len(maps)),
-            Criterion("at_most", 0, 1),
+            Criterion("at_most", 0),
             "maps where (b)'s SR is below (a)'s outside the CIs",
         )
 
     def generated(ev: Evidence) -> Measured:
         rows = ev.episodes
         if rows.empty:
-            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+            return Measured(Number(math.nan), Criterion("at_least", 95))
         rows = rows[
             (rows["method"] == PLANNED) & rows["label"].str.startswith("b-") & rows["scenario"].str.startswith("gen")
         ]
         srs = [column_number(g, "sr", 100, " %") for _, g in rows.groupby("scenario")]
-        return Measured(lowest(srs), Criterion("at_least", 95, 10), f"the lowest of {len(srs)} generated maps")
+        return Measured(lowest(srs), Criterion("at_least", 95), f"the lowest of {len(srs)} generated maps")
 
     return [
         Claim(
@@ -409,12 +408,12 @@ def _learning_claims() -> list[Claim]:
 def _platform_claims() -> list[Claim]:
     def diff(ev: Evidence) -> Measured:
         worst = lowest([ev.number("sr", 100, " %", **{**cell(PLANNED, f), "drive": "diff_drive"}) for f in FORMATIONS])
-        return Measured(worst, Criterion("at_least", 95, 10), "the lowest SR of circle, wedge, line")
+        return Measured(worst, Criterion("at_least", 95), "the lowest SR of circle, wedge, line")
 
     def builtin(ev: Evidence) -> Measured:
         rows = ev.episodes
         if rows.empty:
-            return Measured(Number(math.nan), Criterion("at_least", 95, 10))
+            return Measured(Number(math.nan), Criterion("at_least", 95))
         rows = rows[(rows["method"] == PLANNED) & (rows["faults"] == "") & (rows["drive"] == "holonomic")]
         plain = rows["label"].isin(["", "gap-2m", "gap-3m", "long-10m"]) | rows["label"].str.startswith("b-")
         rows = rows[plain & ~rows["scenario"].str.startswith("gen")]
@@ -426,7 +425,7 @@ def _platform_claims() -> list[Claim]:
         worst = lowest(list(srs.values()))
         name = next((k for k, v in srs.items() if v is worst), "")
         return Measured(
-            worst, Criterion("at_least", 95, 10), f"the lowest of {len(srs)} built-in maps and variants ({name})"
+            worst, Criterion("at_least", 95), f"the lowest of {len(srs)} built-in maps and variants ({name})"
         )
 
     return [

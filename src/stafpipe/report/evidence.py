@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
+from scipy import stats
 
 from stafpipe.errors import StafpipeError
 from stafpipe.launch import MARKER
@@ -55,18 +57,56 @@ class Evidence:
         return self.ablations.get(name, pd.DataFrame())
 
 
+RATES = frozenset({"sr", "sub1_sr", "sub2_sr", "made"})
+"""Columns that are rates in [0, 1] per episode: their interval is Wilson's (`wilson`), not a mean's."""
+Z95 = float(stats.norm.ppf(0.975))
+
+
 def column_number(rows: pd.DataFrame, column: str, scale: float = 1.0, unit: str = "") -> Number:
-    """Mean and 95 % CI of `column` over `rows`, times `scale` (NaN when there is none)."""
+    """Mean of `column` over `rows` with its 95 % interval, times `scale` (NaN when there is none): Wilson's for a
+    rate (`RATES`), else the wider of Student's t and a BCa bootstrap (`mean_interval`)."""
     if rows.empty or column not in rows:
         return Number(math.nan)
-    mean, ci = mean_ci(rows[column])
-    return Number(mean * scale, ci * scale, int(rows[column].notna().sum()), unit)
+    values = rows[column].dropna().to_numpy(float)
+    if len(values) == 0:
+        return Number(math.nan)
+    mean = float(values.mean())
+    if column in RATES:
+        low, high = wilson(mean, len(values))
+        return Number(mean * scale, math.nan, len(values), unit, low * scale, high * scale)
+    return Number(mean * scale, mean_interval(values) * scale, len(values), unit)
+
+
+def wilson(rate: float, n: int) -> tuple[float, float]:
+    """Wilson's 95 % score interval (Wilson, JASA 1927) for a rate observed over n episodes. An episode's success
+    rate is the fraction of its robots that arrived, a number in [0, 1] whose variance is at most rate x (1 - rate):
+    the interval of n Bernoulli trials is at least as wide as that mean's, so it never flatters."""
+    z2n = Z95**2 / n
+    centre = (rate + z2n / 2) / (1 + z2n)
+    half = Z95 / (1 + z2n) * math.sqrt(max(rate * (1 - rate), 0.0) / n + z2n / (4 * n))
+    return max(centre - half, 0.0), min(centre + half, 1.0)
+
+
+def mean_interval(values: np.ndarray) -> float:
+    """The 95 % half-width of a mean: the wider of Student's t and a BCa bootstrap (scipy.stats.bootstrap, 2,000
+    resamples, a fixed seed: the report is reproducible); NaN for one value, 0 when every value is the same."""
+    if len(values) < 2:
+        return math.nan
+    if np.ptp(values) == 0:
+        return 0.0
+    _, t_half = mean_ci(pd.Series(values))
+    boot = stats.bootstrap((values,), np.mean, n_resamples=2000, method="BCa", rng=np.random.default_rng(0))
+    low, high = boot.confidence_interval
+    mean = float(values.mean())
+    spread = max(mean - low, high - mean)
+    return max(t_half, float(spread)) if math.isfinite(spread) else t_half
 
 
 def lowest(numbers: list[Number]) -> Number:
-    """The lowest of the measured numbers (NaN when none was measured)."""
+    """The measured number with the lowest interval's lower end (the weakest for an at-least claim; NaN when none
+    was measured)."""
     found = [x for x in numbers if not math.isnan(x.value)]
-    return min(found, key=lambda x: x.value) if found else Number(math.nan)
+    return min(found, key=lambda x: (x.lower, x.value)) if found else Number(math.nan)
 
 
 def episode_records(rows: pd.DataFrame) -> list[Any]:
