@@ -2,6 +2,7 @@
 pipelines."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -190,3 +191,34 @@ def test_a_report_step_reads_every_earlier_step(workdir, capsys) -> None:
     rows = pd.read_csv(dirs[1] / "reproduction.csv")
     assert len(rows) == len(all_claims()) and set(rows.verdict) == {MISSING}
     assert f"{len(rows)} not measured" in (dirs[1] / "REPRODUCTION.md").read_text()
+
+
+def _levels_run(root, variant, collisions, sr=1.0):
+    rows = [
+        {**r, "label": variant, "collisions": c, "scenario": "doorway"}
+        for r, c in zip(_episodes("staf_planned", "wedge", sr, episodes=20), collisions, strict=True)
+    ]
+    return root / Path(_eval_run(root, variant, rows)).name
+
+
+def test_learning_is_judged_against_the_strongest_non_learned_variant(tmp_path) -> None:
+    claims = {c.statement: c for c in staf_claims()}
+    beats = claims["the learned levels (b) beat the strongest non-learned variant on maps they were not trained on"]
+    worse = claims["no non-learned variant beats the learned levels (b) on any map"]
+    rng = np.random.default_rng(1)
+    b = _levels_run(tmp_path, "b-learned", [0.0] * 20)
+    a = _levels_run(tmp_path, "a-no-learning", list(rng.uniform(1, 3, 20)))
+    [row] = judge_all(gather([b, a]), [beats])
+    assert row.verdict == HOLDS and row.measured.ours.value == 1  # better than the weak variant alone
+    # the teacher as good as (b): a tie, so learning is not shown, though (b) still beats (a)
+    d = _levels_run(tmp_path, "d-teacher", [0.0] * 20)
+    [row] = judge_all(gather([b, a, d]), [beats])
+    assert row.verdict == FAILS and row.measured.ours.value == 0
+    [row] = judge_all(gather([b, a, d]), [worse])
+    assert row.verdict == HOLDS
+    # the approach cap without learning better than (b): that map counts against it
+    f = _levels_run(tmp_path, "f-no-learning", [0.0] * 20, sr=1.0)
+    (tmp_path / "worse").mkdir()
+    b_bad = _levels_run(tmp_path / "worse", "b-learned", list(rng.uniform(1, 3, 20)))
+    [row] = judge_all(gather([b_bad, f]), [worse])
+    assert row.verdict == FAILS and row.measured.ours.value == 1
