@@ -222,3 +222,21 @@ def test_learning_is_judged_against_the_strongest_non_learned_variant(tmp_path) 
     b_bad = _levels_run(tmp_path / "worse", "b-learned", list(rng.uniform(1, 3, 20)))
     [row] = judge_all(gather([b_bad, f]), [worse])
     assert row.verdict == FAILS and row.measured.ours.value == 1
+
+
+def test_the_report_carries_its_figures_so_its_links_resolve(tmp_path) -> None:
+    from stafpipe.config.schema import PlotConfig
+    from stafpipe.stages.plot import _report
+
+    study = tmp_path / "staf_table1"
+    study.mkdir()
+    plot = study / "16-fig4-circle-806131ccd0"
+    plot.mkdir()
+    (plot / "config.yaml").write_text(yaml.safe_dump({"stage": "plot"}))
+    (plot / "stage.json").write_text("{}")
+    (plot / "trajectories_episode_0000.png").write_bytes(b"\x89PNG fake")
+    out = tmp_path / "report"
+    _report(PlotConfig(kind="report", run_dirs=[str(plot)]), out)
+    text = (out / "REPRODUCTION.md").read_text()
+    link = "figures/reproduction/staf_table1-fig4-circle-trajectories_episode_0000.png"
+    assert f"({link})" in text and (out / link).read_bytes() == b"\x89PNG fake"

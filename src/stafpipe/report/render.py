@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections import Counter
 from pathlib import Path
 
@@ -50,7 +49,8 @@ def _cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
-def markdown(rows: list[Row], figures: list[Path], out_dir: Path) -> str:
+def markdown(rows: list[Row], figures: list[str]) -> str:
+    """The report; `figures`: the figures' paths relative to the report (the plot stage copies them there)."""
     counts = Counter(r.verdict for r in rows)
     lines = [
         "# Reproduction report",
@@ -91,5 +91,5 @@ def markdown(rows: list[Row], figures: list[Path], out_dir: Path) -> str:
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
     if figures:
         lines += ["", "## Figures", ""]
-        lines += [f"- [{f.parent.name}/{f.name}]({os.path.relpath(f, out_dir)})" for f in figures]
+        lines += [f"- [{Path(f).name}]({f})" for f in figures]
     return "\n".join(lines) + "\n"

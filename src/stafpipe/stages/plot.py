@@ -4,6 +4,9 @@ own directory (which, like every run directory, carries its resolved config)."""
 from __future__ import annotations
 
 import logging
+import re
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -196,6 +199,22 @@ def _training_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     raise StafpipeError(f"plot.run_dir: {run_dir} holds no learning_curves.parquet or losses.parquet (a training run?)")
 
 
+REPORT_FIGURES = "figures/reproduction"
+"""Where the report's figures are copied, relative to REPRODUCTION.md (in the repo: docs/figures/reproduction/)."""
+
+
+def figure_name(figure: Path) -> str:
+    """A figure's name in the report: its study, its step (run number and config hash dropped) and its file, e.g.
+    `staf_table1-fig4-circle-trajectories_episode_0000.png` for .../staf_table1/16-fig4-circle-806131ccd0/..."""
+    step = re.sub(r"^\d+-|-[0-9a-f]{10}$", "", figure.parent.name)
+    return f"{figure.parent.parent.name}-{step}-{figure.name}"
+
+
+def _copier(source: Path) -> Callable[[Path], object]:
+    """What `atomic_write` calls to copy `source` into its temporary file."""
+    return lambda tmp: shutil.copyfile(source, tmp)
+
+
 def _report(pc: PlotConfig, out_dir: Path) -> list[Path]:
     """REPRODUCTION.md and reproduction.csv over every run directory given (eval, ablate and plot runs; others are
     skipped); every run is read before anything is written."""
@@ -204,8 +223,11 @@ def _report(pc: PlotConfig, out_dir: Path) -> list[Path]:
 
     evidence = gather([Path(d) for d in [pc.run_dir, *pc.run_dirs] if d])
     rows = judge_all(evidence)
-    text = markdown(rows, evidence.figures, out_dir)
+    figures = {f"{REPORT_FIGURES}/{figure_name(f)}": f for f in evidence.figures}
+    text = markdown(rows, list(figures))
     outputs = write_table(rows_frame(rows), out_dir / "reproduction")
+    for name, source in figures.items():  # the report carries its figures: its links resolve wherever it is copied
+        outputs.append(atomic_write(out_dir / name, _copier(source)))
     outputs.append(atomic_write(out_dir / "REPRODUCTION.md", lambda tmp: tmp.write_text(text)))
     print("\n".join(str(p) for p in outputs))
     return outputs
