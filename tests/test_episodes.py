@@ -115,3 +115,17 @@ def test_robot_group_replaces_the_scenario_robot(workdir) -> None:
     robot = scenario_from_yaml(read_episode(path).scenario_yaml).spec.robot
     assert (robot.drive, robot.max_speed, robot.radius) == ("diff_drive", 0.5, 0.2)  # radius kept from corridor.yaml
     assert launch("eval", ["robot.drive=tank", *FAST]) == 2
+
+
+def test_a_team_is_stuck_only_after_standing_still_for_the_whole_stretch() -> None:
+    from stafpipe.episode import Standstill
+
+    pos = np.zeros((2, 3, 2))  # two worlds of three robots
+    still = Standstill(pos, stuck_time=0.3, dt=0.1)
+    assert not still.update(pos).any() and not still.update(pos).any()
+    pos[1, 2] = [0.11, 0.0]  # world 1: one robot moves further than STUCK_DISTANCE: a new stretch begins
+    assert still.update(pos).tolist() == [True, False]
+    pos[1, 2] = [0.15, 0.0]  # within 0.1 m of where the new stretch began: standing still
+    assert still.update(pos).tolist() == [True, False]
+    assert still.update(pos).tolist() == [True, False] and still.update(pos).tolist() == [True, True]
+    assert not Standstill(pos, stuck_time=0.0, dt=0.1).update(pos).any()  # 0: off

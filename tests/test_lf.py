@@ -29,9 +29,13 @@ def test_lf_in_the_open_reaches_the_goal_in_formation_near_the_time_bound(workdi
 
 @pytest.mark.slow  # 2-5 s on 2 cores: keeps `-m "not slow"` under 90 s
 def test_lf_gets_stuck_in_the_corridor_without_collisions(workdir) -> None:
-    r = _results(workdir, "scenario.time_limit=60").iloc[0]
+    r = _results(workdir, "scenario.time_limit=60", "world.stuck_time=0").iloc[0]
     assert r.collisions == 0  # the avoidance caps approach speeds: robots stop short of walls and of each other
     assert r.sr < 1.0  # no subteaming, no adaptation: the outer robots wait at the wall (STAF Section 4)
+    assert r.duration == pytest.approx(60.0, abs=0.2)  # the stuck rule off: the episode runs to its time limit
+    # on (the default): the episode ends once the team has stood still for stuck_time, the same robots short
+    stuck = _results(workdir, "scenario.time_limit=60", "world.stuck_time=5").iloc[0]
+    assert stuck.sr == r.sr and stuck.duration < 50.0
 
 
 def _capped_robot_by_robot(v, obs, radius, avoid_distance, avoid_gain, stop_gap):

@@ -21,7 +21,7 @@ from stafpipe.geometry import Geometry, PathFrame, capsule_arrays, closest_point
 from stafpipe.metrics import MetricContext, RouteProgress, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.world import WorldConfig, Worlds
+from stafpipe.world import STUCK_DISTANCE, WorldConfig, Worlds
 
 
 def scenario_yaml(scenario: Scenario) -> str:
@@ -157,6 +157,23 @@ def run_episode(
     )[0]
 
 
+class Standstill:
+    """Which worlds' teams have stood still for `stuck_time` (`WorldConfig.stuck_time`): no robot further than
+    `STUCK_DISTANCE` from where it stood when the stretch began; any robot moving further starts a new stretch."""
+
+    def __init__(self, pos: np.ndarray, stuck_time: float, dt: float) -> None:
+        self.anchor = pos.copy()
+        self.steps = np.zeros(len(pos), dtype=int)
+        self.limit = int(round(stuck_time / dt)) if stuck_time > 0 else 0
+
+    def update(self, pos: np.ndarray) -> np.ndarray:
+        """Count one more step; the worlds (B,) whose stretch has reached `stuck_time` (none when off)."""
+        moved = np.linalg.norm(pos - self.anchor, axis=-1).max(axis=-1) > STUCK_DISTANCE
+        self.anchor[moved] = pos[moved]
+        self.steps = np.where(moved, 0, self.steps + 1)
+        return self.steps >= self.limit if self.limit else np.zeros(len(pos), dtype=bool)
+
+
 class _Recorder:
     """What one world of a batch records while its episode runs, and its MCAP log if it has one."""
 
@@ -241,6 +258,7 @@ def run_episodes(
     route = RouteProgress([ctx.route] * len(seeds))
     route.update(worlds.pos)
     steps = int(round(scenario.spec.time_limit / world_cfg.control_dt))
+    still = Standstill(worlds.pos, world_cfg.stuck_time, world_cfg.control_dt)
     for step in range(1, steps + 1):
         actions = controller.act_worlds(obs, active)
         obs, events = worlds.step(actions)
@@ -252,6 +270,10 @@ def run_episodes(
                 rec.collided(step, c.a, c.b)
             if passed[w] and matched_goal_distance(worlds.pos[w], worlds.goal[w]).max() <= goal_tolerance:
                 active[w] = False
+        for w in np.flatnonzero(still.update(worlds.pos) & active).tolist():
+            active[w] = False
+            if recorders[w].log:
+                recorders[w].log.event(recorders[w].times[-1], step, "stuck", [], f"{world_cfg.stuck_time:g} s still")
         if not active.any():
             break
     results = []

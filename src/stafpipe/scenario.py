@@ -141,6 +141,10 @@ def _vec2(value: Any, where: str) -> tuple[float, float]:
     return float(value[0]), float(value[1])
 
 
+MAX_TIME_LIMIT = 3600.0
+"""s: the longest episode a scenario may ask for (the longest shipped one is 600 s); longer is a typo or a hang."""
+
+
 def _positive(value: Any, where: str) -> float:
     if not isinstance(value, int | float) or not value > 0 or not math.isfinite(value):
         raise ScenarioError(f"{where} must be a positive number, got {value!r}")
@@ -218,6 +222,11 @@ def _check(spec: ScenarioConfig) -> None:
     if t.spacing < 2 * r.radius:
         raise ScenarioError(f"team.spacing ({t.spacing}) must be at least the robot diameter ({2 * r.radius})")
     _positive(spec.time_limit, "time_limit")
+    if spec.time_limit > MAX_TIME_LIMIT:
+        raise ScenarioError(
+            f"time_limit must be at most {MAX_TIME_LIMIT:g} s (an episode's log grows about 1.8 MB a second), "
+            f"got {spec.time_limit!r}"
+        )
     for j, p in enumerate(spec.reference_path):
         _vec2(list(p), f"reference_path[{j}]")
     for i, m in enumerate(spec.moving_obstacles):

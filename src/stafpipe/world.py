@@ -56,6 +56,12 @@ class WorldConfig:
     """Each episode turns the start formation about its centre by an angle drawn uniformly from +-this (degrees); a
     draw that puts a robot on an obstacle is redrawn (10 tries, then no turn). Goals stay where the scenario has
     them."""
+    stuck_time: float = 20.0
+    """s: an episode ends early once, for this long, no robot has moved more than `STUCK_DISTANCE` from where it
+    stood when that stretch began (a team at a standstill short of its goal: its metrics are those of the moment it
+    ended, its log records a `stuck` event). STAF's L&F rows (SR 40-70 % with TTs of 27-30 s, Table 1) imply that
+    episodes of a stuck team ended so, not at a time limit; time-averaged metrics then do not average standing
+    still. 0: off, every episode runs until its robots are home or its time limit."""
     faults: list[Fault] = field(default_factory=list)
     """Faults the world and its sensing inject (stafpipe.faults: stuck, silent, drop, dropout), the same for every
     method; e.g. `world.faults=[{kind: stuck, robot: 3, start: 8}]` (docs/faults.md, `stafpipe run faults`)."""
@@ -68,10 +74,16 @@ class WorldConfig:
         require(self.collision_slop >= 0, f"{key}.collision_slop", "must be >= 0", self.collision_slop)
         require(self.start_noise >= 0, f"{key}.start_noise", "must be >= 0", self.start_noise)
         require(self.start_kick >= 0, f"{key}.start_kick", "must be >= 0", self.start_kick)
+        require(0 <= self.stuck_time <= 3600, f"{key}.stuck_time", "must be in [0, 3600] s (0: off)", self.stuck_time)
         spread = self.heading_spread_deg
         require(0 <= spread <= 180, f"{key}.heading_spread_deg", "must be in [0, 180]", spread)
         for k, fault in enumerate(self.faults):
             fault.check(f"{key}.faults[{k}]")
+
+
+STUCK_DISTANCE = 0.1
+"""m: a robot that stays within this of where it stood is standing still (`WorldConfig.stuck_time`): more than the
+jitter of a robot holding its place, less than a robot's radius."""
 
 
 @dataclass
