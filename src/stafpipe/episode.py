@@ -272,8 +272,8 @@ def run_episodes(
                 active[w] = False
         for w in np.flatnonzero(still.update(worlds.pos) & active).tolist():
             active[w] = False
-            if recorders[w].log:
-                recorders[w].log.event(recorders[w].times[-1], step, "stuck", [], f"{world_cfg.stuck_time:g} s still")
+            if log := recorders[w].log:
+                log.event(recorders[w].times[-1], step, "stuck", [], f"{world_cfg.stuck_time:g} s still")
         if not active.any():
             break
     results = []
