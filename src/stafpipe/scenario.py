@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
@@ -143,6 +144,28 @@ def _vec2(value: Any, where: str) -> tuple[float, float]:
 
 MAX_TIME_LIMIT = 3600.0
 """s: the longest episode a scenario may ask for (the longest shipped one is 600 s); longer is a typo or a hang."""
+BOUNDS = {
+    "robot.radius": 5.0,
+    "robot.max_speed": 50.0,
+    "robot.max_accel": 500.0,
+    "robot.max_turn_rate": 100.0,
+    "team.spacing": 100.0,
+    "world extent": 10_000.0,
+    "moving_obstacles radius": 50.0,
+    "moving_obstacles speed": 50.0,
+}
+"""Upper bounds (m, m/s, m/s^2, rad/s) grounded in the robots these papers use (0.1-1 m, 0.5-2 m/s) with a wide
+margin: a value beyond one is a typo that would make every metric meaningless (a 1e308 m/s robot's TT / bound was
+3.6e307); a world side above 10 km is past any map the physics' float precision serves at cm scale."""
+MAX_TEAM = 1000
+"""Robots in a team: the largest team any benchmark runs (STAF's decision time at 1,000 robots)."""
+
+
+def _at_most(value: float, bound: str, where: str = "") -> float:
+    """`value` if it is within `BOUNDS[bound]`, else an error naming `where` (default: the bound's own name)."""
+    if value > BOUNDS[bound]:
+        raise ScenarioError(f"{where or bound} must be at most {BOUNDS[bound]:g}, got {value!r}")
+    return value
 
 
 def _positive(value: Any, where: str) -> float:
@@ -205,18 +228,26 @@ def _check(spec: ScenarioConfig) -> None:
     w = spec.world
     if not (w.xmax > w.xmin and w.ymax > w.ymin):
         raise ScenarioError(f"world must have xmax > xmin and ymax > ymin, got {w}")
+    _at_most(max(w.xmax - w.xmin, w.ymax - w.ymin), "world extent", "the world's longer side")
     t, r = spec.team, spec.robot
     if t.n < 2:
         raise ScenarioError(f"team.n must be >= 2 (a formation needs two robots), got {t.n}")
+    if t.n > MAX_TEAM:
+        raise ScenarioError(f"team.n must be at most {MAX_TEAM}, got {t.n}")
     if t.formation not in FORMATION_TYPES:
         raise ScenarioError(f"team.formation must be one of {list(FORMATION_TYPES)}, got {t.formation!r}")
-    _positive(t.spacing, "team.spacing")
+    _at_most(_positive(t.spacing, "team.spacing"), "team.spacing")
     for key in ("start", "goal"):
         x, y = _vec2(list(getattr(t, key)), f"team.{key}")
         if not (w.xmin < x < w.xmax and w.ymin < y < w.ymax):
             raise ScenarioError(f"team.{key} {[x, y]} lies outside the world {w}")
     for key in ("radius", "max_speed", "max_accel", "max_turn_rate"):
-        _positive(getattr(r, key), f"robot.{key}")
+        _at_most(_positive(getattr(r, key), f"robot.{key}"), f"robot.{key}")
+    if math.dist(_vec2(list(t.start), "team.start"), _vec2(list(t.goal), "team.goal")) < 2 * r.radius:
+        raise ScenarioError(
+            f"team.goal {list(t.goal)} lies within a robot's diameter of team.start {list(t.start)}: there is no way "
+            "to go (SR 1 and TT 0 would mean nothing)"
+        )
     if r.drive not in DRIVES:
         raise ScenarioError(f"robot.drive must be one of {list(DRIVES)}, got {r.drive!r}")
     if t.spacing < 2 * r.radius:
@@ -229,8 +260,17 @@ def _check(spec: ScenarioConfig) -> None:
         )
     for j, p in enumerate(spec.reference_path):
         _vec2(list(p), f"reference_path[{j}]")
+    if len(spec.reference_path) == 1:
+        raise ScenarioError("reference_path has one point: a route needs at least two (or none: the shortest path)")
     for i, m in enumerate(spec.moving_obstacles):
-        _positive(m.radius, f"moving_obstacles[{i}].radius"), _positive(m.speed, f"moving_obstacles[{i}].speed")
+        _at_most(
+            _positive(m.radius, f"moving_obstacles[{i}].radius"),
+            "moving_obstacles radius",
+            f"moving_obstacles[{i}].radius",
+        )
+        _at_most(
+            _positive(m.speed, f"moving_obstacles[{i}].speed"), "moving_obstacles speed", f"moving_obstacles[{i}].speed"
+        )
         if len(m.waypoints) < 1:
             raise ScenarioError(f"moving_obstacles[{i}].waypoints needs at least one point")
         for j, p in enumerate(m.waypoints):
@@ -283,6 +323,15 @@ def _check_placement(scenario: Scenario) -> None:
                 f"team.{key}: robot {k}'s slot {np.round(slots[k], 2).tolist()} overlaps an obstacle "
                 f"({-clear[k]:.2f} m deep)"
             )
+        if key == "start":
+            for i, m in enumerate(spec.moving_obstacles):
+                gap = np.linalg.norm(slots - np.asarray(m.waypoints[0], float), axis=1) - r - m.radius
+                if (gap < 0).any():
+                    k = int(np.argmin(gap))
+                    raise ScenarioError(
+                        f"moving_obstacles[{i}] starts on robot {k} of the team (waypoints[0] "
+                        f"{list(m.waypoints[0])}, {-gap[k]:.2f} m deep): every episode would begin with a contact"
+                    )
 
 
 def _map_obstacles(spec: ScenarioConfig, capsules: list[Capsule]) -> OccupancyGrid:
@@ -335,6 +384,39 @@ def _required_sections(raw: Any, path: Path) -> None:
         )
 
 
+MAX_YAML_VALUES = 1_000_000
+"""Values a scenario file may expand to once its YAML aliases are followed (the largest shipped map: a few thousand)."""
+
+
+def _refuse_alias_bombs(path: Path) -> None:
+    """Refuse a file whose aliases expand past `MAX_YAML_VALUES` (nested aliases double at every level: a file of a
+    few lines can expand to billions), counted on the composed node graph, where an alias is one shared node, before
+    anything is expanded."""
+    try:
+        root = yaml.compose(path.read_text(encoding="utf-8", errors="replace"), Loader=yaml.SafeLoader)
+    except yaml.YAMLError:
+        return  # a syntax error: OmegaConf.load says where
+    sizes: dict[int, int] = {}
+
+    def size(node: yaml.Node) -> int:
+        if id(node) not in sizes:
+            sizes[id(node)] = 0  # a recursive alias counts once (YAML's loader refuses it later)
+            if isinstance(node, yaml.MappingNode):
+                total = sum(size(k) + size(v) for k, v in node.value)
+            elif isinstance(node, yaml.SequenceNode):
+                total = sum(size(v) for v in node.value)
+            else:
+                total = 0
+            sizes[id(node)] = min(1 + total, MAX_YAML_VALUES + 1)
+        return sizes[id(node)]
+
+    if root is not None and size(root) > MAX_YAML_VALUES:
+        raise ScenarioError(
+            f"scenario file {path} expands to more than {MAX_YAML_VALUES:,} values through its YAML aliases (&, *); "
+            "write the values out, or split the scenario"
+        )
+
+
 def load_scenario_file(path: str | Path) -> ScenarioConfig:
     """Read a scenario YAML file into a typed ScenarioConfig; errors name the file and the field."""
     path = Path(path)
@@ -344,6 +426,7 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
         )
     if not path.is_file():
         raise ScenarioError(f"scenario file {path} does not exist")
+    _refuse_alias_bombs(path)
     try:
         raw = OmegaConf.load(path)
     except Exception as exc:  # noqa: BLE001 - a YAML syntax error
@@ -362,7 +445,7 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
             xmin, ymin, xmax, ymax = load_map(spec.occupancy.map, spec.occupancy.unknown).extent()
         except StafpipeError as exc:
             raise ScenarioError(f"scenario file {path}: {exc}") from None
-        spec.world = WorldBounds(xmin, ymin, xmax, ymax)
+        spec.world = WorldBounds(float(xmin), float(ymin), float(xmax), float(ymax))
     return spec
 
 

@@ -14,11 +14,19 @@ from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from stafpipe.errors import ConfigError, require
 
+SEED_STRIDE = 100_003
+"""Episode k of a run seeded s is seeded s x SEED_STRIDE + k (`stages.eval.episode_seed`): a prime stride, so runs
+with nearby seeds share no episode seed for the first 100,003 episodes."""
+MAX_SEED = (2**63 - 1) // SEED_STRIDE - SEED_STRIDE
+"""The largest run seed whose episode seeds fit the 64-bit integers of the episode logs (about 9.2e13)."""
+
 
 def check_run_config(cfg: DictConfig) -> None:
     _unknown_keys(cfg, "")
     _non_finite(OmegaConf.to_container(cfg, resolve=True), "")
-    require(int(cfg.seed) >= 0, "seed", "must be >= 0", cfg.seed)
+    require(
+        0 <= int(cfg.seed) <= MAX_SEED, "seed", f"must be in [0, {MAX_SEED}] (episode seeds must fit 64 bits)", cfg.seed
+    )
     for key in ("world", "sensing", "eval", *STAGE_SECTIONS.get(str(cfg.get("stage")), ())):
         if key in cfg and cfg[key] is not None:
             check = getattr(OmegaConf.to_object(cfg[key]), "check", None)

@@ -17,9 +17,11 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 from scipy import stats
 
+from stafpipe.config.checks import SEED_STRIDE
 from stafpipe.config.schema import EvalConfig, FormationConfig, RobotConfig
 from stafpipe.controllers import make_controller
 from stafpipe.episode import run_episodes
+from stafpipe.errors import require
 from stafpipe.geometry import Geometry
 from stafpipe.io import write_table
 from stafpipe.progress import progress
@@ -29,7 +31,6 @@ from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
 
 log = logging.getLogger(__name__)
-SEED_STRIDE = 100_003
 AUTO_BATCH = 50
 """`eval.batch=0`: episodes run at once. Measured on 2 cores, 50 corridor episodes: the speed-up levels off from 10-25
 worlds (DGNN 16.3 s one at a time, 4.5 s at 10, 3.9 s at 25 and 50) and 50 is no slower than those."""
@@ -96,6 +97,14 @@ def run_eval(cfg: DictConfig, out_dir: Path) -> list[Path]:
     ev.check()
     scenario = scenario_for(cfg)
     world_cfg = section(cfg.world, WorldConfig)
+    limit = scenario.spec.time_limit
+    for k, fault in enumerate(world_cfg.faults):
+        require(
+            fault.start < limit,
+            f"world.faults[{k}].start",
+            f"must be before the scenario's time limit ({limit:g} s): the fault would never fire",
+            fault.start,
+        )
     sensing = section(cfg.sensing, SensingConfig)
     method_cfg: Any = OmegaConf.to_object(cfg.method)
     geometry = Geometry.of(scenario)
