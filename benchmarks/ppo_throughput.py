@@ -24,8 +24,8 @@ from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.ppo import teams_of, update
 from stafpipe.learning.rollout import collect, gae
+from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
 from stafpipe.torch_io import training_device
 from stafpipe.world import Worlds
 

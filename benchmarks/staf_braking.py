@@ -26,8 +26,8 @@ from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import teacher_actions
 from stafpipe.metrics import matched_goal_distance
 from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import Observation, SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 EVAL = EvalConfig()  # the evaluation's defaults: goal tolerance and CFI margin

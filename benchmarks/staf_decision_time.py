@@ -31,8 +31,8 @@ from stafpipe.highlevel.infer import divider
 from stafpipe.learning.checkpoint import ensemble_paths, load_policy
 from stafpipe.learning.features import staf_pairs
 from stafpipe.scenario import build_scenario
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 

@@ -14,8 +14,8 @@ from stafpipe.episode import centred_path, episode_context
 from stafpipe.formations import place
 from stafpipe.geometry import Geometry, obstacle_distance
 from stafpipe.scenario import build_scenario
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 
 
 def scenario_with(name: str, kind: str, n: int | None = None):

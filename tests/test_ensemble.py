@@ -13,8 +13,8 @@ from stafpipe.errors import StafpipeError
 from stafpipe.learning.checkpoint import load_policy, save_policy, shipped_policy
 from stafpipe.learning.config import PolicyConfig
 from stafpipe.learning.staf_net import StafPolicy
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 from test_learned import _team
 

@@ -15,9 +15,9 @@ from stafpipe.episode import run_episodes
 from stafpipe.geometry import Geometry
 from stafpipe.launch import launch
 from stafpipe.scenario import TeamSpec, build_scenario
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.stages.eval import auto_batch
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
 
 SEEDS = [11, 12, 13]

@@ -25,8 +25,8 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
     from stafpipe.learning.rollout import commands
     from stafpipe.learning.teachers import teacher_actions
     from stafpipe.scenario import build_scenario
+    from stafpipe.scenario_pool import load_named_scenario, path_and_width
     from stafpipe.sensing import SensingConfig
-    from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
     from stafpipe.world import WorldConfig, Worlds
 
     base = load_named_scenario("corridor")

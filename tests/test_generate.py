@@ -4,8 +4,8 @@ import pyarrow.parquet as pq
 
 from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.formations import formation_slots
+from stafpipe.highlevel.instances import COLUMNS, generate_instances
 from stafpipe.launch import launch
-from stafpipe.stages.generate import COLUMNS, generate_instances
 
 
 def _generate(seed: int, *extra: str) -> bytes:

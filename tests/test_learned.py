@@ -29,8 +29,8 @@ from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
 from stafpipe.learning.teachers import AVOID_GAIN, SLIDE_MARGIN, off_the_wall, teacher_actions
 from stafpipe.scenario import TeamSpec, WorldBounds, build_scenario
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig, Worlds
 
 

@@ -148,8 +148,8 @@ def test_differential_drive_followers_cap_the_motion_their_drive_makes() -> None
     from stafpipe.episode import run_episode
     from stafpipe.geometry import Geometry
     from stafpipe.scenario import build_scenario
+    from stafpipe.scenario_pool import load_named_scenario
     from stafpipe.sensing import SensingConfig
-    from stafpipe.stages.train_ppo import load_named_scenario
     from stafpipe.world import WorldConfig
 
     base = load_named_scenario("corridor").spec

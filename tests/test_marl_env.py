@@ -13,8 +13,8 @@ from stafpipe.learning.config import PolicyConfig, RewardConfig, TrainPPOConfig
 from stafpipe.learning.ppo import teams_of
 from stafpipe.learning.rollout import collect
 from stafpipe.marl_env import BatchedTeamEnv
+from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
 from stafpipe.world import WorldConfig, Worlds
 
 pettingzoo = pytest.importorskip("pettingzoo")  # the `marl` extra (installed with `test`)

@@ -159,8 +159,8 @@ def test_cfi_in_the_passage_counts_only_samples_a_subteam_spends_there() -> None
 def test_the_corridors_passage_is_where_its_walls_are() -> None:
     from stafpipe.episode import episode_context
     from stafpipe.geometry import Geometry
+    from stafpipe.scenario_pool import load_named_scenario
     from stafpipe.sensing import SensingConfig
-    from stafpipe.stages.train_ppo import load_named_scenario
 
     corridor = load_named_scenario("corridor")  # walls from x = 12 to 18; the path starts at x = 4
     ctx, _ = episode_context(corridor, Geometry(corridor), SensingConfig(), 0.3, 0.1)

@@ -12,7 +12,7 @@ from PIL import Image
 from stafpipe.geometry import obstacle_distance
 from stafpipe.occupancy import MapError, load_map
 from stafpipe.scenario import ScenarioError, build_scenario, load_scenario_file
-from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.scenario_pool import load_named_scenario
 
 MAP_YAML = "image: {image}\nresolution: {resolution}\norigin: {origin}\nnegate: {negate}\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"  # noqa: E501
 

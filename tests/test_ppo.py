@@ -18,8 +18,8 @@ from stafpipe.launch import launch
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
 from stafpipe.learning.rollout import gae
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
 
 TINY = [
@@ -321,7 +321,7 @@ def test_the_shipped_weights_are_the_best_on_held_out_maps(workdir) -> None:
 def test_curriculum_variants_that_do_not_fit_their_map_are_left_out() -> None:
     from stafpipe.errors import StafpipeError
     from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
-    from stafpipe.stages.train_ppo import curriculum
+    from stafpipe.scenario_pool import curriculum
 
     team = TeamSpec(n=4, formation="circle", spacing=1.0, start=[1.5, 1.5], goal=[6.5, 1.5], heading_deg=0.0)
     narrow = build_scenario(ScenarioConfig(name="narrow", world=WorldBounds(0, 0, 8, 3), obstacles=[], team=team))

@@ -15,8 +15,8 @@ from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.episode import run_episode
 from stafpipe.geometry import Geometry, PathFrame, point_ahead
 from stafpipe.metrics import MetricContext, RouteProgress, Trajectory, route_done, success_rate, travel_time
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
 
 LOOP = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0], [0.0, 0.5]])

@@ -25,8 +25,8 @@ from stafpipe.learning.features import STAF_EDGE, STAF_OWN, staf_features
 from stafpipe.learning.staf_net import StafPolicy
 from stafpipe.paths import conf_dir
 from stafpipe.scenario import build_scenario
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 

@@ -17,8 +17,8 @@ from stafpipe.learning.checkpoint import build_policy, save_policy
 from stafpipe.learning.config import PolicyConfig
 from stafpipe.methods.staf.method import StafConfig
 from stafpipe.methods.staf.subteaming import SubteamingConfig
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import Worlds
 
 

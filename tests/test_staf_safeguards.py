@@ -17,7 +17,7 @@ from stafpipe.controllers.plan_geometry import column_rank, follow_order
 from stafpipe.geometry import obstacle_distance
 from stafpipe.highlevel.infer import divider
 from stafpipe.scenario import build_scenario, load_scenario_file
-from stafpipe.stages.train_ppo import load_named_scenario
+from stafpipe.scenario_pool import load_named_scenario
 
 
 def _map(tmp_path, text: str):

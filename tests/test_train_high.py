@@ -12,8 +12,8 @@ from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.highlevel.checkpoint import load_checkpoint
 from stafpipe.highlevel.config import HighLevelConfig, TrainHighConfig
 from stafpipe.highlevel.graphs import team_graph, teams_from_frame
+from stafpipe.highlevel.instances import generate_instances
 from stafpipe.launch import launch
-from stafpipe.stages.generate import generate_instances
 
 TINY = ["data.instances=48", "train_high.epochs=2", "train_high.batch_size=16"]
 

@@ -30,8 +30,8 @@ from stafpipe.errors import ConfigError
 from stafpipe.faults import Fault
 from stafpipe.geometry import Geometry
 from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
+from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
-from stafpipe.stages.train_ppo import load_named_scenario
 from stafpipe.world import WorldConfig
 
 

@@ -45,7 +45,7 @@ class BatchedTeamEnv:
         plan: Any = None,
     ) -> None:
         from stafpipe.errors import StafpipeError
-        from stafpipe.stages.train_ppo import load_named_scenario, path_and_width
+        from stafpipe.scenario_pool import load_named_scenario, path_and_width
 
         if method not in ADAPTERS:
             raise StafpipeError(f"method must be one of {sorted(ADAPTERS)}, got {method!r}")

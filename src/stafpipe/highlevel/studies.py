@@ -23,9 +23,9 @@ from stafpipe.config.schema import DataConfig, FormationConfig
 from stafpipe.highlevel.config import LOSS_VARIANTS, AblateConfig, HighLevelConfig, LossWeights, TrainHighConfig
 from stafpipe.highlevel.graphs import Team, radius_edges, team_graph, teams_from_frame
 from stafpipe.highlevel.infer import divide, predict
+from stafpipe.highlevel.instances import generate_instances
 from stafpipe.highlevel.model import DeepGraphCut
 from stafpipe.highlevel.partition import balanced_kmeans, partition_stats, spectral_partition
-from stafpipe.stages.generate import generate_instances
 
 TEST_STREAM = 1_000_003  # test teams are drawn from seed + TEST_STREAM * (k + 1): never the training draws
 

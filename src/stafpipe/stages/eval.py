@@ -6,7 +6,6 @@ metric, Student t), and `episodes/episode_NNNN.mcap` (one log per episode).
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from pathlib import Path
@@ -18,14 +17,15 @@ from omegaconf import DictConfig, OmegaConf
 from scipy import stats
 
 from stafpipe.config.checks import SEED_STRIDE
-from stafpipe.config.schema import EvalConfig, FormationConfig, RobotConfig
+from stafpipe.config.schema import EvalConfig
 from stafpipe.controllers import make_controller
 from stafpipe.episode import run_episodes
 from stafpipe.errors import require
 from stafpipe.geometry import Geometry
 from stafpipe.io import write_table
 from stafpipe.progress import progress
-from stafpipe.scenario import Scenario, build_scenario, resolve_scenario
+from stafpipe.scenario import Scenario, resolve_scenario
+from stafpipe.scenario_pool import with_overrides
 from stafpipe.sections import section
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig
@@ -56,25 +56,6 @@ def scenario_for(cfg: DictConfig) -> Scenario:
     The result is built (and so validated) again, so an override such as `robot.drive=tank` fails like a bad file would.
     """
     return with_overrides(resolve_scenario(cfg.scenario), cfg)
-
-
-def with_overrides(scenario: Scenario, cfg: DictConfig) -> Scenario:
-    """`scenario` with the `formation` and `robot` groups' non-null fields in place of its own."""
-    formation = section(cfg.formation, FormationConfig)
-    formation.check(allow_unset=True)
-    robot = section(cfg.robot, RobotConfig)
-    spec = scenario.spec
-    if formation.type is not None:
-        spacing = formation.spacing if formation.spacing is not None else spec.team.spacing
-        spec = dataclasses.replace(
-            spec,
-            team=dataclasses.replace(
-                spec.team, formation=formation.type, angle_deg=formation.angle_deg, spacing=spacing
-            ),
-        )
-    if robot.overrides():
-        spec = dataclasses.replace(spec, robot=dataclasses.replace(spec.robot, **robot.overrides()))
-    return scenario if spec is scenario.spec else build_scenario(spec)
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:

@@ -45,10 +45,10 @@ def load_formations(path: str) -> pd.DataFrame:
 
 def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.highlevel.graphs import team_graph, teams_from_frame
+    from stafpipe.highlevel.instances import generate_instances
     from stafpipe.highlevel.training import train
     from stafpipe.launch import config_hash
     from stafpipe.plots.training import loss_curve_figure
-    from stafpipe.stages.generate import generate_instances
     from stafpipe.tensorboard_log import TB_DIR, ScalarLog
 
     high = section(cfg.high, HighLevelConfig)

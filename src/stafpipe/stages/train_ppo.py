@@ -8,7 +8,6 @@ every `train_ppo.checkpoint_every` iterations), `learning_curves.parquet/.csv` (
 from __future__ import annotations
 
 import copy
-import dataclasses
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,21 +19,15 @@ from omegaconf import DictConfig, OmegaConf
 from stafpipe.errors import StafpipeError
 from stafpipe.io import save_figure, write_table
 from stafpipe.learning.config import TrainPPOConfig
-from stafpipe.paths import conf_dir
 from stafpipe.progress import progress
-from stafpipe.scenario import Scenario, build_scenario, load_scenario_file
+from stafpipe.scenario import Scenario
+from stafpipe.scenario_pool import curriculum, path_and_width, scenario_pool
 from stafpipe.sections import section
 
 if TYPE_CHECKING:
     from stafpipe.learning.ppo import Drawn
 
 log = logging.getLogger(__name__)
-
-
-def load_named_scenario(name: str) -> Scenario:
-    """A built-in scenario by name (conf/scenario/<name>.yaml) or a scenario file by path."""
-    builtin = conf_dir() / "scenario" / f"{name}.yaml"
-    return build_scenario(load_scenario_file(builtin if builtin.is_file() else Path(name)))
 
 
 def resume_state(out_dir: Path, digest: str) -> Path | None:
@@ -56,60 +49,6 @@ BUILT_IN_TEST_MAPS = {
     *("corridor_walker", "crossing_walkers"),
 }
 """STAF's maps (conf/scenario/): what learned methods are tested on, never trained on (docs/decisions.md)."""
-
-
-def path_and_width(scenario: Scenario) -> tuple[np.ndarray, float]:
-    """The team centre's shortest path (TeamInfo.path) and the narrowest passage on the way, as an eval episode
-    computes them."""
-    from stafpipe.episode import episode_context
-    from stafpipe.geometry import Geometry
-    from stafpipe.sensing import SensingConfig
-
-    ctx, path = episode_context(scenario, Geometry.of(scenario), SensingConfig(), 0.3, 0.0)
-    return path, ctx.passage_width
-
-
-def scenario_files(entry: str) -> list[str]:
-    """A `train_ppo.scenarios` entry as scenario names or files: a directory stands for every `*.yaml` in it."""
-    path = Path(entry)
-    if path.is_dir():
-        files = sorted(str(p) for p in path.glob("*.yaml"))
-        if not files:
-            raise StafpipeError(f"train_ppo.scenarios: directory {entry} holds no scenario *.yaml file")
-        return files
-    return [entry]
-
-
-def curriculum(pool: list[Scenario], field: str, values: list, key: str) -> list[Scenario]:
-    """Every scenario of `pool` with each of `values` as its team's `field` (formation or n); a variant whose team
-    does not fit its map (a line of 11 wider than the map's goal area) is left out with a warning, not trained on."""
-    from stafpipe.scenario import ScenarioError
-
-    out, left_out = [], []
-    for s in pool:
-        for value in values:
-            try:
-                out.append(
-                    build_scenario(dataclasses.replace(s.spec, team=dataclasses.replace(s.spec.team, **{field: value})))
-                )
-            except ScenarioError as exc:
-                left_out.append(f"{s.name} with {field} {value} ({exc})")
-    if left_out:
-        shown = "; ".join(left_out[:3]) + (" ..." if len(left_out) > 3 else "")
-        total = len(pool) * len(values)
-        log.warning("%s: %d of %d variants left out, their team does not fit: %s", key, len(left_out), total, shown)
-    if left_out and not out:
-        raise StafpipeError(f"{key}: no scenario fits its team with these {field}s {values}: {left_out[0]}")
-    return out
-
-
-def scenario_pool(entries: list[str], cfg: DictConfig, formations: list[str], key: str) -> list[Scenario]:
-    """The scenarios of `entries` (names, files, directories) with the run's overrides, each with every curriculum
-    formation (none: its own)."""
-    from stafpipe.stages.eval import with_overrides
-
-    pool = [with_overrides(load_named_scenario(name), cfg) for entry in entries for name in scenario_files(entry)]
-    return curriculum(pool, "formation", formations, key) if formations and pool else pool
 
 
 def by_team(drawn: list[Drawn]) -> dict[str, list[Drawn]]:
