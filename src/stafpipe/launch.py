@@ -15,6 +15,7 @@ import logging
 import os
 import re
 import shutil
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -174,16 +175,61 @@ def _discard_if_empty(out_dir: Path) -> None:
                 out_dir.parent.rmdir()
 
 
+RESUMABLE = frozenset({"train-ppo", "train-high"})
+"""Stages whose run directory holds a training state a rerun goes on from (`resume=true`): kept when interrupted."""
+
+
+def _clear_outputs(out_dir: Path) -> bool:
+    """Remove what an earlier or interrupted run of a stage left in `out_dir` that a rerun could mix with its own: its
+    completion marker, its episode logs (`episodes/*.mcap`) and its per-episode figures (`*episode_NNNN.*`), so that
+    `plot trajectories` can never draw a stale episode. Only files of those names: a directory the user named for
+    the run may hold files of theirs. True if anything was removed."""
+    if not out_dir.is_dir():
+        return False
+    stale = [out_dir / MARKER] if (out_dir / MARKER).is_file() else []
+    stale += [*out_dir.glob("episodes/*.mcap"), *out_dir.glob("episodes/*.part")]
+    stale += [p for p in out_dir.glob("*episode_[0-9][0-9][0-9][0-9].*") if p.is_file()]
+    for p in stale:
+        with contextlib.suppress(OSError):
+            p.unlink()
+    with contextlib.suppress(OSError):
+        (out_dir / "episodes").rmdir()  # only if empty
+    return bool(stale)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt  # SIGTERM (a scheduler's kill, `kill PID`) ends a run as Ctrl-C does
+
+
 def stage_task(cfg: DictConfig) -> None:
     """Hydra's task function for every stage."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     started = time.perf_counter()
     lock = RunDirLock(out_dir)
+    resumable = str(cfg.get("stage")) in RESUMABLE
+    with contextlib.suppress(ValueError):  # only the main thread may set a handler; a sweep's workers keep theirs
+        signal.signal(signal.SIGTERM, _interrupt)
     try:
         lock.acquire()  # refused: the directory is another run's, so nothing in it is touched
         check_run_config(cfg)
+        if not resumable and _clear_outputs(out_dir):
+            log.warning("%s held files of an earlier run of this stage; removed, the run starts over", out_dir)
         inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote
         outputs = stage_function(cfg.stage)(cfg, out_dir)
+    except KeyboardInterrupt:
+        if lock.held:
+            _remove_partials(out_dir)
+            if not resumable:
+                _clear_outputs(out_dir)
+            with contextlib.suppress(OSError):
+                lock.release()
+            _discard_if_empty(out_dir)
+        if HydraConfig.get().mode == RunMode.MULTIRUN:
+            raise
+        kept = "its training state is kept: the same command with resume=true goes on from it"
+        gone = "its episode logs were removed and it wrote no results; the same command starts it over"
+        print(f"interrupted: {cfg.stage} in {out_dir}; {kept if resumable else gone}", file=sys.stderr)
+        sys.exit(130)
     except StafpipeError as exc:
         if lock.held:
             lock.release()
