@@ -114,6 +114,18 @@ def test_an_unreadable_image_and_a_missing_map_are_refused(tmp_path) -> None:
         load_scenario_file(tmp_path / "sc.yaml")
 
 
+def test_an_image_too_large_is_refused_from_its_header(tmp_path) -> None:
+    """A PGM header declaring 20,000 x 20,000 pixels: refused before a pixel is decoded (Pillow would raise its
+    DecompressionBombError, or decode 400 million pixels)."""
+    path = draw(tmp_path, box_cells())
+    (tmp_path / "m.pgm").write_bytes(b"P5\n20000 20000\n255\n" + bytes(16))
+    with pytest.raises(MapError, match=r"m.pgm declares more than 50,000,000 pixels"):
+        load_map(path)
+    (tmp_path / "m.pgm").write_bytes(b"P5\n8000 8000\n255\n" + bytes(16))  # below Pillow's own guard
+    with pytest.raises(MapError, match=r"8000 x 8000 pixels, more than 50,000,000"):
+        load_map(path)
+
+
 @pytest.mark.parametrize(
     ("start", "goal", "named"),
     [

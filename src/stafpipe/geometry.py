@@ -22,6 +22,10 @@ from scipy.sparse.csgraph import dijkstra
 
 from stafpipe.scenario import Scenario
 
+CHUNK_BYTES = 256 * 2**20
+"""Bytes the clearance grid's temporaries may take at once (four arrays of blocks x cells x candidates x 2 floats):
+a map of 10,000 small obstacles asked for 3.35 GiB in one piece."""
+
 
 def capsule_arrays(scenario: Scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Static obstacles as arrays: segment starts (C, 2), ends (C, 2), radii (C,)."""
@@ -93,12 +97,16 @@ def grid_clearance(xs: np.ndarray, ys: np.ndarray, scenario: Scenario, block: in
     cells = cells.reshape(rows, block, cols, block, 2).transpose(0, 2, 1, 3, 4).reshape(rows * cols, block * block, 2)
     d = np.empty(cells.shape[:2])
     by_count = np.argsort(count, kind="stable")  # blocks with as many candidates together
-    for start in range(0, len(cells), 2_000):  # chunks keep the (blocks, cells, K, 2) temporary small
-        part = by_count[start : start + 2_000]
+    start = 0
+    while start < len(cells):  # chunks keep the (blocks, cells, K, 2) temporaries within CHUNK_BYTES
+        k_most = int(count[by_count[min(start + 2_000, len(cells)) - 1]])  # sorted: the chunk's largest K
+        size = int(max(1, min(2_000, CHUNK_BYTES // (block * block * max(k_most, 1) * 2 * 8 * 4))))
+        part = by_count[start : start + size]
         k = int(count[part].max())
         ca, cb, cr = (x[candidates[part, :k]] for x in (a, b, r))
         cp = closest_points(cells[part], ca, cb)
         d[part] = (np.linalg.norm(cells[part][:, :, None, :] - cp, axis=-1) - cr[:, None, :]).min(axis=2)
+        start += size
     d = d.reshape(rows, cols, block, block).transpose(0, 2, 1, 3).reshape(rows * block, cols * block)
     points = np.stack(np.broadcast_arrays(xs[None, :], ys[:, None]), axis=-1).reshape(-1, 2)
     return _inside_is_zero(d[:h_cells, :w_cells].ravel(), points, scenario).reshape(h_cells, w_cells)

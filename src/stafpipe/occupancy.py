@@ -92,6 +92,11 @@ class OccupancyGrid:
         return segments
 
 
+MAX_MAP_PIXELS = 50_000_000
+"""Pixels a map image may have (a 7,000 x 7,000 map: 350 m square at 5 cm); Pillow's own guard is a warning up to
+178 million and an exception name beyond."""
+
+
 def _runs(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Row, first column and one-past-last column of every horizontal run of True cells."""
     padded = np.zeros((occupied.shape[0], occupied.shape[1] + 2), dtype=np.int8)
@@ -188,7 +193,16 @@ def _grid(
 
     try:
         with Image.open(image_path) as img:
+            if img.width * img.height > MAX_MAP_PIXELS:  # read from the header, before any pixel is decoded
+                raise MapError(
+                    f"map file {source}: image {image_path} is {img.width} x {img.height} pixels, more than "
+                    f"{MAX_MAP_PIXELS:,}; downsample it (and raise `resolution` by the same factor)"
+                )
             gray = np.asarray(img.convert("L"), dtype=float)
+    except Image.DecompressionBombError:
+        raise MapError(
+            f"map file {source}: image {image_path} declares more than {MAX_MAP_PIXELS:,} pixels; downsample it"
+        ) from None
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as exc:  # Pillow: a malformed header
         raise MapError(f"map file {source}: image {image_path} cannot be read ({exc})") from None
     p = gray / 255.0 if negate else (255.0 - gray) / 255.0
