@@ -136,6 +136,9 @@ class Scenario:
 
 
 def _vec2(value: Any, where: str) -> tuple[float, float]:
+    """`value` as a point [x, y]; anything else (a number, a flat list of points, a word) named at `where`."""
+    if OmegaConf.is_config(value):
+        value = OmegaConf.to_container(value)
     ok = isinstance(value, list | tuple) and len(value) == 2 and all(isinstance(v, int | float) for v in value)
     if not ok or not all(math.isfinite(v) for v in value):
         raise ScenarioError(f"{where} must be two numbers [x, y], got {value!r}")
@@ -168,6 +171,13 @@ def _at_most(value: float, bound: str, where: str = "") -> float:
     return value
 
 
+def _number(value: Any, where: str) -> float:
+    """`value` as a finite number (an angle, say), else an error naming `where`."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ScenarioError(f"{where} must be a finite number, got {value!r}")
+    return float(value)
+
+
 def _positive(value: Any, where: str) -> float:
     if not isinstance(value, int | float) or not value > 0 or not math.isfinite(value):
         raise ScenarioError(f"{where} must be a positive number, got {value!r}")
@@ -187,7 +197,7 @@ def _obstacle(item: Any, where: str) -> tuple[np.ndarray | None, list[Capsule]]:
         cx, cy = _vec2(body["center"], f"{where}.center")
         w, h = _vec2(body["size"], f"{where}.size")
         _positive(w, f"{where}.size[0]"), _positive(h, f"{where}.size[1]")
-        a = math.radians(float(body.get("angle_deg", 0.0)))
+        a = math.radians(_number(body.get("angle_deg", 0.0), f"{where}.angle_deg"))
         corners = np.array([[-w, -h], [w, -h], [w, h], [-w, h]]) / 2.0
         rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
         poly = corners @ rot.T + (cx, cy)
@@ -206,7 +216,7 @@ def _obstacle(item: Any, where: str) -> tuple[np.ndarray | None, list[Capsule]]:
         return None, [Capsule(c, c, _positive(body["radius"], f"{where}.radius"))]
     else:
         _keys(body, {"a", "b"}, {"radius"}, where)
-        radius = float(body.get("radius", 0.05))
+        radius = _number(body.get("radius", 0.05), f"{where}.radius")
         if radius < 0:
             raise ScenarioError(f"{where}.radius must be >= 0, got {radius}")
         return None, [Capsule(_vec2(body["a"], f"{where}.a"), _vec2(body["b"], f"{where}.b"), radius)]
@@ -238,12 +248,12 @@ def _check(spec: ScenarioConfig) -> None:
         raise ScenarioError(f"team.formation must be one of {list(FORMATION_TYPES)}, got {t.formation!r}")
     _at_most(_positive(t.spacing, "team.spacing"), "team.spacing")
     for key in ("start", "goal"):
-        x, y = _vec2(list(getattr(t, key)), f"team.{key}")
+        x, y = _vec2(getattr(t, key), f"team.{key}")
         if not (w.xmin < x < w.xmax and w.ymin < y < w.ymax):
             raise ScenarioError(f"team.{key} {[x, y]} lies outside the world {w}")
     for key in ("radius", "max_speed", "max_accel", "max_turn_rate"):
         _at_most(_positive(getattr(r, key), f"robot.{key}"), f"robot.{key}")
-    if math.dist(_vec2(list(t.start), "team.start"), _vec2(list(t.goal), "team.goal")) < 2 * r.radius:
+    if math.dist(_vec2(t.start, "team.start"), _vec2(t.goal, "team.goal")) < 2 * r.radius:
         raise ScenarioError(
             f"team.goal {list(t.goal)} lies within a robot's diameter of team.start {list(t.start)}: there is no way "
             "to go (SR 1 and TT 0 would mean nothing)"
@@ -259,7 +269,7 @@ def _check(spec: ScenarioConfig) -> None:
             f"got {spec.time_limit!r}"
         )
     for j, p in enumerate(spec.reference_path):
-        _vec2(list(p), f"reference_path[{j}]")
+        _vec2(p, f"reference_path[{j}]")
     if len(spec.reference_path) == 1:
         raise ScenarioError("reference_path has one point: a route needs at least two (or none: the shortest path)")
     for i, m in enumerate(spec.moving_obstacles):
@@ -274,7 +284,7 @@ def _check(spec: ScenarioConfig) -> None:
         if len(m.waypoints) < 1:
             raise ScenarioError(f"moving_obstacles[{i}].waypoints needs at least one point")
         for j, p in enumerate(m.waypoints):
-            _vec2(list(p), f"moving_obstacles[{i}].waypoints[{j}]")
+            _vec2(p, f"moving_obstacles[{i}].waypoints[{j}]")
 
 
 def build_scenario(spec: ScenarioConfig) -> Scenario:

@@ -61,6 +61,14 @@ def explain(exc: BaseException, stage: str, overrides: Sequence[str]) -> str:
     cause = exc.__cause__ or exc
     full_key = getattr(cause, "full_key", None)
     first = str(cause).strip().splitlines()[0] if str(cause).strip() else type(cause).__name__
+    if full_key and "." not in str(full_key):  # OmegaConf names a field inside a list by its own name alone
+        holders = [
+            o.lstrip("+~").split("=", 1)[0]
+            for o in overrides
+            if "=" in o and re.search(rf"\b{re.escape(str(full_key))}\s*:", o.split("=", 1)[1])
+        ]
+        if len(holders) == 1:
+            return f"{holders[0]}, field {full_key}: {first}"
     return f"{full_key}: {first}" if full_key else first
 
 
