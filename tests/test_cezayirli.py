@@ -39,7 +39,7 @@ def test_theorem_1_constraints_hold_on_every_step_of_a_random_run() -> None:
             name="open",
             world=WorldBounds(0, 0, 200, 200),
             obstacles=[],
-            reference_path=[[150.0, 100.0]],
+            reference_path=[[100.0, 100.0], [150.0, 100.0]],
             team=TeamSpec(
                 n=8, formation="circle", spacing=6.0, start=(100.0, 100.0), goal=(150.0, 150.0), heading_deg=0.0
             ),
