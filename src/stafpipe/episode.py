@@ -18,6 +18,7 @@ from stafpipe.controllers.plan_geometry import extent, lateral_clearance
 from stafpipe.episode_log import EpisodeLogWriter, EpisodeRecord
 from stafpipe.faults import ROBOT_FAULTS
 from stafpipe.geometry import Geometry, PathFrame, capsule_arrays, closest_points, path_length
+from stafpipe.interrupt import check as check_interrupt
 from stafpipe.metrics import MetricContext, RouteProgress, Trajectory, episode_metrics, matched_goal_distance
 from stafpipe.scenario import Scenario, ScenarioConfig, ScenarioError, build_scenario
 from stafpipe.sensing import SensingConfig
@@ -260,6 +261,7 @@ def run_episodes(
     steps = int(round(scenario.spec.time_limit / world_cfg.control_dt))
     still = Standstill(worlds.pos, world_cfg.stuck_time, world_cfg.control_dt)
     for step in range(1, steps + 1):
+        check_interrupt()  # Ctrl-C or SIGTERM: stop between steps (interrupt.py)
         actions = controller.act_worlds(obs, active)
         obs, events = worlds.step(actions)
         passed = route.update(worlds.pos)

@@ -15,7 +15,6 @@ import logging
 import os
 import re
 import shutil
-import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -31,6 +30,7 @@ from stafpipe import __version__
 from stafpipe.config import register_configs
 from stafpipe.config.checks import check_run_config
 from stafpipe.errors import StafpipeError
+from stafpipe.interrupt import stop_at_boundaries
 from stafpipe.io import atomic_write, write_json
 from stafpipe.paths import conf_dir
 from stafpipe.run_lock import RunDirLock
@@ -197,25 +197,20 @@ def _clear_outputs(out_dir: Path) -> bool:
     return bool(stale)
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt  # SIGTERM (a scheduler's kill, `kill PID`) ends a run as Ctrl-C does
-
-
 def stage_task(cfg: DictConfig) -> None:
     """Hydra's task function for every stage."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     started = time.perf_counter()
     lock = RunDirLock(out_dir)
     resumable = str(cfg.get("stage")) in RESUMABLE
-    with contextlib.suppress(ValueError):  # only the main thread may set a handler; a sweep's workers keep theirs
-        signal.signal(signal.SIGTERM, _interrupt)
     try:
         lock.acquire()  # refused: the directory is another run's, so nothing in it is touched
         check_run_config(cfg)
         if not resumable and _clear_outputs(out_dir):
             log.warning("%s held files of an earlier run of this stage; removed, the run starts over", out_dir)
         inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote
-        outputs = stage_function(cfg.stage)(cfg, out_dir)
+        with stop_at_boundaries():  # Ctrl-C and SIGTERM end the stage at its next step or item (interrupt.py)
+            outputs = stage_function(cfg.stage)(cfg, out_dir)
     except KeyboardInterrupt:
         if lock.held:
             _remove_partials(out_dir)

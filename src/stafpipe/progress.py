@@ -13,6 +13,8 @@ from typing import TypeVar
 
 from tqdm import tqdm
 
+from stafpipe.interrupt import check as check_interrupt
+
 T = TypeVar("T")
 EVERY = 10.0
 """Seconds between progress lines when there is no terminal."""
@@ -87,6 +89,7 @@ class progress(Iterable[T]):
             self._bar = tqdm(desc=self.desc, unit=self.unit, total=self.total, initial=self.initial)
             try:
                 for item in self.items:
+                    check_interrupt()
                     yield item
                     self._bar.update(self.size(item))
             finally:
@@ -96,6 +99,7 @@ class progress(Iterable[T]):
         self._beat.start()
         try:
             for item in self.items:
+                check_interrupt()
                 yield item
                 self._beat.done += self.size(item)
         finally:
