@@ -9,6 +9,9 @@ from dataclasses import dataclass
 from stafpipe.report.evidence import Evidence, wilson
 from stafpipe.report.verdicts import Criterion, Number
 
+PLANNED = "staf_planned"
+"""STAF-planned (ours): its rows stand beside the paper's STAF numbers as our own variant."""
+
 
 @dataclass(frozen=True)
 class Measured:
