@@ -103,6 +103,7 @@ def test_the_shipped_second_run_is_named_shipped_and_fits_the_shipped_checkpoint
         load_policy("shipped:dgnn", "staf_planned")
 
 
+@pytest.mark.slow  # about 7 s on 2 cores
 def test_the_shipped_staf_is_the_shipped_pair_and_a_users_checkpoint_acts_alone(tmp_path) -> None:
     """`method.ensemble` unset: the shipped checkpoint comes with its partner run, any other checkpoint with none."""
     pair = StafMethodConfig(checkpoint="shipped:staf_planned", ensemble=["shipped:staf_planned_seed1"])

@@ -379,6 +379,7 @@ def test_robots_faster_than_the_training_robots_are_driven_no_faster(tmp_path, t
     assert driven * 0.5 < fastest <= math.sqrt(2) * driven + 1e-9
 
 
+@pytest.mark.slow  # a training on generated maps: about 16 s on 2 cores
 def test_train_ppo_on_a_directory_of_generated_maps_records_them(workdir) -> None:
     assert (
         launch(

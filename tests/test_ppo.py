@@ -84,7 +84,7 @@ def _same(a, b) -> bool:
     return all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True))
 
 
-@pytest.mark.parametrize("method", ["dgnn", "staf"])
+@pytest.mark.parametrize("method", [pytest.param("dgnn", marks=pytest.mark.slow), "staf"])  # dgnn: about 6 s
 def test_training_is_deterministic_and_resumes_exactly(tmp_path, method) -> None:
     full, hist = _train(tmp_path / "a", method=method)
     again, _ = _train(tmp_path / "b", method=method)
