@@ -197,6 +197,20 @@ def _clear_outputs(out_dir: Path) -> bool:
     return bool(stale)
 
 
+def _abandon(out_dir: Path, lock: RunDirLock, clear: bool = False) -> None:
+    """A run that stops unfinished: its unfinished files removed (and with `clear` its episode logs and marker), its
+    lock released, its directory removed if nothing else is in it. Only a run holding the lock touches the directory:
+    another run's is never touched."""
+    if not lock.held:
+        return
+    _remove_partials(out_dir)
+    if clear:
+        _clear_outputs(out_dir)
+    with contextlib.suppress(OSError):
+        lock.release()
+    _discard_if_empty(out_dir)
+
+
 def stage_task(cfg: DictConfig) -> None:
     """Hydra's task function for every stage."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
@@ -212,13 +226,7 @@ def stage_task(cfg: DictConfig) -> None:
         with stop_at_boundaries():  # Ctrl-C and SIGTERM end the stage at its next step or item (interrupt.py)
             outputs = stage_function(cfg.stage)(cfg, out_dir)
     except KeyboardInterrupt:
-        if lock.held:
-            _remove_partials(out_dir)
-            if not resumable:
-                _clear_outputs(out_dir)
-            with contextlib.suppress(OSError):
-                lock.release()
-            _discard_if_empty(out_dir)
+        _abandon(out_dir, lock, clear=not resumable)
         if HydraConfig.get().mode == RunMode.MULTIRUN:
             raise
         kept = "its training state is kept: the same command with resume=true goes on from it"
@@ -234,11 +242,7 @@ def stage_task(cfg: DictConfig) -> None:
         print(f"error: {exc}", file=sys.stderr)
         sys.exit(2)
     except BaseException as exc:
-        if lock.held:  # only this run's own unfinished files: another run's directory is never touched
-            _remove_partials(out_dir)
-            with contextlib.suppress(OSError):
-                lock.release()
-            _discard_if_empty(out_dir)
+        _abandon(out_dir, lock)
         fault = fs_fault(exc, out_dir)
         if fault is None or HydraConfig.get().mode == RunMode.MULTIRUN:
             raise

@@ -49,9 +49,10 @@ class Number:
             return "-"
         if not math.isnan(self.low):
             ci = f" [{self.low:.{digits}f}, {self.high:.{digits}f}]" if self.high > self.low else ""
+        elif math.isnan(self.ci):
+            ci = " (no interval)" if self.n == 1 else ""
         else:
-            ci = " (no interval)" if math.isnan(self.ci) and self.n == 1 else ""
-            ci = ci or ("" if math.isnan(self.ci) or self.ci == 0 else f" ± {self.ci:.{digits}f}")
+            ci = f" ± {self.ci:.{digits}f}" if self.ci else ""
         n = f" (n={self.n})" if self.n else ""
         return f"{self.value:.{digits}f}{ci}{self.unit}{n}"
 
