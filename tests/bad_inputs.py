@@ -74,7 +74,25 @@ def _flipped(tmp: Path) -> bytes:
     return bytes(data)
 
 
+def _foreign_mcap(tmp: Path) -> bytes:
+    """A valid MCAP file of another tool: JSON messages on /foo."""
+    import io
+
+    from mcap.writer import Writer
+
+    out = io.BytesIO()
+    writer = Writer(out)
+    writer.start()
+    schema = writer.register_schema(name="Foo", encoding="jsonschema", data=b"{}")
+    channel = writer.register_channel(topic="/foo", message_encoding="json", schema_id=schema)
+    for k in range(3):
+        writer.add_message(channel_id=channel, log_time=k, data=b"{}", publish_time=k)
+    writer.finish()
+    return out.getvalue()
+
+
 MAKERS = {
+    "@foreign_mcap": _foreign_mcap,
     "@policy_other_shape": lambda tmp: _policy(tmp, "staf_planned", 16, recorded_hidden=64),
     "@policy_small": lambda tmp: _policy(tmp, "dgnn", 8),
     "@policy_small_staf": lambda tmp: _policy(tmp, "staf_planned", 8),

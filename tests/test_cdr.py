@@ -69,3 +69,31 @@ def test_every_message_matches_the_library_encoder_byte_for_byte(n) -> None:
     event = {"time": t, "step": 5 * n, "kind": "split", "robots": robots, "detail": "x" * n}
     assert cdr.event(t, 5 * n, "split", robots, "x" * n) == _library_bytes("/events", event)
     assert cdr.metrics(context) == _library_bytes("/metrics", {"json": context})
+
+
+@pytest.mark.parametrize("n", [0, 1, 7])
+def test_the_team_state_reader_gives_what_the_library_decoder_gives(n) -> None:
+    """`read_team_state` (numpy reads, used by inspect) decodes every field as mcap-ros2-support's decoder does, odd
+    counts (the int32 subteams then misalign the next float64 sequence) and moving obstacles included."""
+    from mcap_ros2.decoder import DecoderFactory
+
+    rng = np.random.default_rng(10 + n)
+    pos, vel, targets = rng.normal(size=(3, n, 2))
+    data = cdr.team_state(
+        12.375, pos, vel, rng.normal(size=n), targets, rng.integers(0, 4, n), rng.normal(size=(n // 2 + 1, 2))
+    )
+    out = io.BytesIO()
+    writer = Writer(out)
+    writer.write_message(
+        "/robots/state",
+        writer.register_msgdef(TOPICS["/robots/state"], _msgdef(TOPICS["/robots/state"])),
+        {},
+        log_time=0,
+    )
+    writer.finish()
+    [(schema, channel, _)] = list(make_reader(io.BytesIO(out.getvalue())).iter_messages())
+    expected = DecoderFactory().decoder_for(channel.message_encoding, schema)(data)
+    got = cdr.read_team_state(data)
+    assert got.time == expected.time == 12.375
+    for field in got._fields[1:]:
+        assert np.array_equal(getattr(got, field), np.asarray(getattr(expected, field))), field

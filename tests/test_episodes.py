@@ -129,3 +129,30 @@ def test_a_team_is_stuck_only_after_standing_still_for_the_whole_stretch() -> No
     assert still.update(pos).tolist() == [True, False]
     assert still.update(pos).tolist() == [True, False] and still.update(pos).tolist() == [True, True]
     assert not Standstill(pos, stuck_time=0.0, dt=0.1).update(pos).any()  # 0: off
+
+
+def test_inspect_outlines_a_log_too_long_to_recompute_and_says_so(workdir, monkeypatch) -> None:
+    """Above `MAX_RECOMPUTED` robot-steps inspect checks and outlines the log without holding its states, and says
+    plainly that the metrics were not recomputed; below it, the same outline and the metrics."""
+    import stafpipe.inspect_log as inspect_log
+
+    out = workdir / "run"
+    words = ["eval", "method=straight", "scenario=corridor", "eval.episodes=1", "scenario.time_limit=3"]
+    assert CliRunner().invoke(app, [*words, f"hydra.run.dir={out}"]).exit_code == 0
+    log = str(out / "episodes" / "episode_0000.mcap")
+    full, equal = inspect_log.describe(log)
+    assert equal and "equal to the logged ones" in full
+    monkeypatch.setattr(inspect_log, "MAX_RECOMPUTED", 100)  # 31 steps x 10 robots is above it
+    outline, equal = inspect_log.describe(log)
+    assert "metrics NOT recomputed: 310 robot-steps" in outline and "sr " not in outline
+    assert outline.splitlines()[:5] == full.splitlines()[:5]  # the same outline either way
+
+
+def test_recover_on_an_intact_log_writes_nothing(workdir) -> None:
+    out = workdir / "run"
+    words = ["eval", "method=straight", "scenario=corridor", "eval.episodes=1", "scenario.time_limit=2"]
+    assert CliRunner().invoke(app, [*words, f"hydra.run.dir={out}"]).exit_code == 0
+    log = out / "episodes" / "episode_0000.mcap"
+    result = CliRunner().invoke(app, ["inspect", "--recover", str(log)])
+    assert result.exit_code == 0 and "no damage found; nothing to recover, nothing written" in result.output
+    assert not list(log.parent.glob("*.recovered.mcap"))

@@ -191,7 +191,10 @@ def inspect(
         if recover:
             out = file[: -len(".mcap")] + ".recovered.mcap" if file.endswith(".mcap") else file + ".recovered.mcap"
             kept, channels, damage = recover_log(file, out)
-            found = "; ".join(map(str, damage)) or "no damage found"
+            if not damage:
+                typer.echo(f"{file}: no damage found; nothing to recover, nothing written (inspect it as it is)")
+                return
+            found = "; ".join(map(str, damage))
             typer.echo(f"recovered {kept} messages on {channels} channels into {out} ({found})")
             return
         report, equal = describe(file)

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
-from mcap.exceptions import McapError
+from mcap.exceptions import DecoderNotFoundError, McapError
 from mcap.reader import make_reader
 from mcap.writer import Writer as RawWriter
 from mcap_ros2.decoder import DecoderFactory
@@ -129,42 +130,76 @@ class EpisodeRecord:
     """The damage a recovered (partial) log was copied from; None for a log as written."""
 
 
-def read_episode(path: str | Path) -> EpisodeRecord:
-    """Read an episode log; a clear LogError if it is missing, damaged or not ours."""
-    path = Path(path)
+def _not_a_log(path: Path) -> None:
     if not path.is_file():
-        raise LogError(f"{path}: " + ("a directory, not an episode log" if Path(path).is_dir() else "no such file"))
-    info, states, events, metrics, recovered = None, [], [], None, None
-    topics: dict[str, int] = {}
+        raise LogError(f"{path}: " + ("a directory, not an episode log" if path.is_dir() else "no such file"))
+
+
+def _stream(path: Path, on_message: Callable[[str, Any], None]) -> str | None:
+    """Decode every message of an episode log in log-time order, handing each to `on_message(topic, message)`, one
+    chunk in memory at a time; the damage a recovered log was copied from, or None. A clear LogError where the file
+    is missing, damaged or not a stafpipe episode log."""
+    _not_a_log(path)
+    recovered = None
     try:
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
+            summary = reader.get_summary()
+            topics = sorted({c.topic for c in summary.channels.values()}) if summary is not None else None
+            if topics is not None and "/episode" not in topics:
+                raise LogError(
+                    f"{path}: not a stafpipe episode log (its channels: {', '.join(topics) or 'none'}; an episode "
+                    "log has /episode and /robots/state)"
+                )
             for meta in reader.iter_metadata():
                 if meta.name == RECOVERED:
                     recovered = meta.metadata.get("damage", "unknown")
-            for _, channel, _, msg in reader.iter_decoded_messages(log_time_order=True):
-                topic = channel.topic
-                topics[topic] = topics.get(topic, 0) + 1
-                if topic == "/episode":
-                    info = msg
-                elif topic == "/robots/state":
-                    states.append(msg)
-                elif topic == "/events":
-                    events.append(
-                        {
-                            "time": msg.time,
-                            "step": msg.step,
-                            "kind": msg.kind,
-                            "robots": list(msg.robots),
-                            "detail": msg.detail,
-                        }
-                    )
-                elif topic == "/metrics":
-                    metrics = json.loads(msg.json)
+            decoders: dict[int, Callable[[bytes], Any]] = {}
+            factory = DecoderFactory()
+            for schema, channel, msg in reader.iter_messages(log_time_order=True):
+                if channel.topic == "/robots/state":
+                    on_message(channel.topic, cdr.read_team_state(msg.data))
+                elif channel.topic == "/robots/poses":  # the same poses as the states, for Foxglove
+                    on_message(channel.topic, None)
+                else:
+                    if channel.id not in decoders:
+                        decoder = factory.decoder_for(channel.message_encoding, schema)
+                        if decoder is None:
+                            raise DecoderNotFoundError(f"no decoder for {channel.topic} ({channel.message_encoding})")
+                        decoders[channel.id] = decoder
+                    on_message(channel.topic, decoders[channel.id](msg.data))
+    except DecoderNotFoundError as exc:
+        raise LogError(f"{path}: not a stafpipe episode log ({exc})") from None
     except (McapError, ValueError, KeyError, EOFError, OSError) as exc:
         raise LogError(
             f"{path}: not a readable MCAP episode log ({type(exc).__name__}: {exc}); try `stafpipe inspect --recover`"
         ) from None
+    return recovered
+
+
+def _event(msg: Any) -> dict[str, Any]:
+    return {"time": msg.time, "step": msg.step, "kind": msg.kind, "robots": list(msg.robots), "detail": msg.detail}
+
+
+def read_episode(path: str | Path) -> EpisodeRecord:
+    """Read an episode log whole; a clear LogError if it is missing, damaged or not ours."""
+    path = Path(path)
+    info, states, events, metrics = None, [], [], None
+    topics: dict[str, int] = {}
+
+    def take(topic: str, msg: Any) -> None:
+        nonlocal info, metrics
+        topics[topic] = topics.get(topic, 0) + 1
+        if topic == "/episode":
+            info = msg
+        elif topic == "/robots/state":
+            states.append(msg)
+        elif topic == "/events":
+            events.append(_event(msg))
+        elif topic == "/metrics":
+            metrics = json.loads(msg.json)
+
+    recovered = _stream(path, take)
     if info is None or not states:
         raise LogError(f"{path}: not a stafpipe episode log (no /episode or /robots/state messages)")
     arr = lambda *keys: np.stack([np.stack([np.asarray(getattr(s, k), float) for k in keys], -1) for s in states])  # noqa: E731
@@ -188,16 +223,69 @@ def read_episode(path: str | Path) -> EpisodeRecord:
     )
 
 
+@dataclass
+class EpisodeOutline:
+    """What `stafpipe inspect` shows of a log without holding its states: read message by message, in memory that
+    does not grow with the episode's length."""
+
+    method: str = ""
+    seed: int = 0
+    robots: int = 0
+    steps: int = 0
+    duration: float = 0.0
+    topics: dict[str, int] = field(default_factory=dict)
+    changes: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    """(time, subteam labels) where the subteams change (the first `MAX_CHANGES` of them)."""
+    events: dict[str, int] = field(default_factory=dict)
+    metrics: dict[str, float] | None = None
+    recovered: str | None = None
+
+
+MAX_CHANGES = 20
+
+
+def outline_episode(path: str | Path) -> EpisodeOutline:
+    """The outline of an episode log of any size; a clear LogError if it is missing, damaged or not ours."""
+    path, out = Path(path), EpisodeOutline()
+    last: np.ndarray | None = None
+
+    def take(topic: str, msg: Any) -> None:
+        nonlocal last
+        out.topics[topic] = out.topics.get(topic, 0) + 1
+        if topic == "/episode":
+            out.method, out.seed = msg.method, int(msg.seed)
+        elif topic == "/robots/state":
+            labels = np.asarray(msg.subteam, int)
+            out.robots, out.steps, out.duration = len(labels), out.steps + 1, float(msg.time)
+            if (last is None or not np.array_equal(labels, last)) and len(out.changes) < MAX_CHANGES:
+                out.changes.append((float(msg.time), labels))
+            last = labels
+        elif topic == "/events":
+            out.events[msg.kind] = out.events.get(msg.kind, 0) + 1
+        elif topic == "/metrics":
+            out.metrics = json.loads(msg.json)
+
+    out.recovered = _stream(path, take)
+    if not out.method or not out.steps:
+        raise LogError(f"{path}: not a stafpipe episode log (no /episode or /robots/state messages)")
+    return out
+
+
 def recover(src: str | Path, dst: str | Path) -> tuple[int, int, list[Damage]]:
-    """Copy every intact chunk's records of a truncated or damaged MCAP file into a valid one, also those after a
-    damaged chunk (mcap_check.intact_records). The copy carries a `stafpipe.recovered` metadata record naming the
-    damage, so that it reads as a partial episode. Returns (messages kept, channels, the damage found)."""
+    """Copy every intact chunk's records of a truncated or damaged MCAP episode log into a valid one, also those after
+    a damaged chunk (mcap_check.intact_records). The copy carries a `stafpipe.recovered` metadata record naming the
+    damage, so that it reads as a partial episode. Returns (messages kept, channels, the damage found); an intact log
+    is not copied (0, 0, []), and an MCAP file of another tool is refused."""
     src = Path(src)
-    if not src.is_file():
-        raise LogError(f"{src}: " + ("a directory, not an episode log" if Path(src).is_dir() else "no such file"))
+    _not_a_log(src)
     data = src.read_bytes()
     scan = intact_records(data)
     damage = check(data, scan)
+    topics = sorted({c.topic for c in scan.channels.values()})
+    if topics and "/episode" not in topics:
+        raise LogError(f"{src}: not a stafpipe episode log (its channels: {', '.join(topics)}); nothing recovered")
+    if not damage:
+        return 0, 0, []
     messages = [m for m in scan.messages if m.channel_id in scan.channels]
     if not messages:
         raise LogError(f"{src}: no complete message could be recovered")

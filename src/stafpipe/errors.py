@@ -13,3 +13,12 @@ def require(ok: bool, key: str, message: str, value: object) -> None:
     """Raise a ConfigError naming `key` unless `ok`."""
     if not ok:
         raise ConfigError(f"{key} {message}, got {value!r}")
+
+
+def yaml_problem(exc: Exception) -> str:
+    """What is wrong in a YAML file and where ("found duplicate key time_limit at line 11, column 1"): PyYAML's
+    first line ("while constructing a mapping") names neither the key nor the line."""
+    problem, mark = getattr(exc, "problem", None), getattr(exc, "problem_mark", None)
+    if not problem:
+        return str(exc).splitlines()[0]
+    return f"{problem} at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else str(problem)

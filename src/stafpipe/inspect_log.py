@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from stafpipe.episode import scenario_from_yaml, trajectory_from_record
-from stafpipe.episode_log import EpisodeRecord, LogError, read_episode
-from stafpipe.mcap_check import check
+from stafpipe.episode_log import EpisodeRecord, LogError, outline_episode, read_episode
+from stafpipe.mcap_check import FileView, check
 from stafpipe.metrics import MetricContext, episode_metrics
 
 
@@ -23,38 +23,48 @@ def _same(a: float, b: float) -> bool:
     return (math.isnan(a) and math.isnan(b)) or math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9)
 
 
+MAX_RECOMPUTED = 200_000
+"""Robot-steps (steps x robots) of the largest log whose metrics `inspect` recomputes: the whole trajectory and the
+metrics' work arrays are held in memory for that (about 1 kB a robot-step, measured). A longer log is checked and
+outlined message by message, and the report says its metrics were not recomputed (benchmarks/inspect_memory.py)."""
+
+
 def describe(path: str) -> tuple[str, bool]:
-    """A human-readable report of the log; True when the recomputed metrics equal the logged ones. A damaged file
-    (any CRC, magic or record length that does not hold: mcap_check.check) is an error naming the first damage."""
+    """A human-readable report of the log; True when the recomputed metrics equal the logged ones (or were not
+    compared, as the report says). A damaged file (any CRC, magic or record length that does not hold:
+    mcap_check.check) is an error naming the first damage. Memory stays bounded for a log of any size."""
     file = Path(path)
     if not file.is_file():
         raise LogError(f"{path}: " + ("a directory, not an episode log" if Path(path).is_dir() else "no such file"))
-    damage = check(file.read_bytes())
+    with open(file, "rb") as f:
+        damage = check(FileView(f))
     if damage:
         more = f" and {len(damage) - 1} more" if len(damage) > 1 else ""
         raise LogError(f"{path}: damaged at {damage[0]}{more}; `stafpipe inspect --recover` keeps every intact chunk")
-    rec = read_episode(path)
-    recomputed = recompute_metrics(rec)
+    out = outline_episode(path)
     lines = [
         f"{path}",
-        f"  method {rec.method}, seed {rec.seed}, {rec.positions.shape[1]} robots, "
-        f"{len(rec.time)} steps, {rec.time[-1]:.1f} s",
+        f"  method {out.method}, seed {out.seed}, {out.robots} robots, {out.steps} steps, {out.duration:.1f} s",
+        "  channels: " + ", ".join(f"{t} ({n})" for t, n in sorted(out.topics.items())),
+        "  subteams over time:",
     ]
-    lines.append("  channels: " + ", ".join(f"{t} ({n})" for t, n in sorted(rec.topics.items())))
-    changes = [0] + [k for k in range(1, len(rec.time)) if not np.array_equal(rec.subteams[k], rec.subteams[k - 1])]
-    lines.append("  subteams over time:")
-    for k in changes[:20]:
-        groups = {int(s): [int(i) for i in np.flatnonzero(rec.subteams[k] == s)] for s in np.unique(rec.subteams[k])}
-        lines.append(f"    t={rec.time[k]:7.1f} s  " + "  ".join(f"{s}: {g}" for s, g in groups.items()))
-    kinds: dict[str, int] = {}
-    for e in rec.events:
-        kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
-    lines.append("  events: " + (", ".join(f"{k} x{n}" for k, n in sorted(kinds.items())) or "none"))
+    for time, labels in out.changes:
+        groups = {int(s): [int(i) for i in np.flatnonzero(labels == s)] for s in np.unique(labels)}
+        lines.append(f"    t={time:7.1f} s  " + "  ".join(f"{s}: {g}" for s, g in groups.items()))
+    lines.append("  events: " + (", ".join(f"{k} x{n}" for k, n in sorted(out.events.items())) or "none"))
+    if out.recovered is not None:
+        lines.insert(1, f"  PARTIAL episode, recovered from a damaged log ({out.recovered})")
+    if out.steps * out.robots > MAX_RECOMPUTED:
+        lines.append(
+            f"  metrics NOT recomputed: {out.steps * out.robots:,} robot-steps is more than inspect holds in memory "
+            f"({MAX_RECOMPUTED:,}); the log is intact (every CRC holds)"
+        )
+        return "\n".join(lines), True
+    rec = read_episode(path)
+    recomputed = recompute_metrics(rec)
     logged = rec.metrics if rec.metrics and rec.recovered is None else {}  # a partial episode has other metrics
     # a metric added after the log was written is shown, not compared (the log cannot disagree with it)
     equal = all(_same(recomputed[k], float(logged[k])) for k in recomputed if k in logged) if logged else True
-    if rec.recovered is not None:
-        lines.insert(1, f"  PARTIAL episode, recovered from a damaged log ({rec.recovered})")
     verdict = (
         "not compared with the logged ones"
         if rec.recovered is not None

@@ -10,10 +10,11 @@ damaged chunk (or a damaged record length) to the next chunk whose CRC holds, so
 from __future__ import annotations
 
 import io
+import os
 import struct
 import zlib
 from dataclasses import dataclass, field
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -23,6 +24,57 @@ from mcap.stream_reader import breakup_chunk
 MAGIC = b"\x89MCAP0\r\n"
 _FOOTER = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
 _OPCODES = {int(o) for o in Opcode}
+
+
+BLOCK = 1 << 20
+"""Bytes read at a time where a file is scanned or its CRC computed: memory stays bounded for a log of any size."""
+
+
+class FileView:
+    """A file's bytes, read only where they are asked for, with the parts of the `bytes` interface the scan uses
+    (len, an index, a slice, find): `check` walks a log of any size in memory bounded by its largest record."""
+
+    def __init__(self, f: BinaryIO) -> None:
+        self.f = f
+        self.size = os.fstat(f.fileno()).st_size
+
+    def __len__(self) -> int:
+        return self.size
+
+    def __getitem__(self, key: int | slice) -> Any:
+        if isinstance(key, slice):
+            start, stop, _ = key.indices(self.size)
+            self.f.seek(start)
+            return self.f.read(max(0, stop - start))
+        index = key + self.size if key < 0 else key
+        if not 0 <= index < self.size:
+            raise IndexError(key)
+        self.f.seek(index)
+        return self.f.read(1)[0]
+
+    def find(self, sub: bytes, start: int = 0) -> int:
+        pos = start
+        while pos < self.size:
+            found = self[pos : pos + BLOCK + len(sub) - 1].find(sub)
+            if found >= 0:
+                return pos + found
+            pos += BLOCK
+        return -1
+
+
+Data = bytes | FileView
+
+
+def crc_of(data: Data, start: int, end: int) -> int:
+    """CRC-32 of data[start:end], read a block at a time."""
+    crc = 0
+    for pos in range(start, end, BLOCK):
+        crc = zlib.crc32(data[pos : min(pos + BLOCK, end)], crc)
+    return crc
+
+
+def _unpack(fmt: str, data: Data, offset: int) -> tuple[Any, ...]:
+    return struct.unpack(fmt, data[offset : offset + struct.calcsize(fmt)])
 
 
 @dataclass
@@ -48,7 +100,7 @@ class Scan:
     """Offset of the DataEnd record, if one was reached."""
 
 
-def _record_at(data: bytes, pos: int) -> tuple[int, int] | None:
+def _record_at(data: Data, pos: int) -> tuple[int, int] | None:
     """(opcode, end offset) of a record that starts at `pos` and fits the file, or None."""
     if pos + 9 > len(data):
         return None
@@ -57,7 +109,7 @@ def _record_at(data: bytes, pos: int) -> tuple[int, int] | None:
     return (op, end) if op in _OPCODES and end <= len(data) else None
 
 
-def _unreadable(data: bytes, pos: int) -> str:
+def _unreadable(data: Data, pos: int) -> str:
     if pos + 9 > len(data) or (
         data[pos] in _OPCODES and pos + 9 + int.from_bytes(data[pos + 1 : pos + 9], "little") > len(data)
     ):
@@ -65,22 +117,22 @@ def _unreadable(data: bytes, pos: int) -> str:
     return f"unknown record opcode {data[pos]}"
 
 
-def _definition(data: bytes, pos: int, end: int) -> Schema | Channel:
+def _definition(data: Data, pos: int, end: int) -> Schema | Channel:
     """The Schema or Channel record at `pos` (outside chunks: no CRC of its own, the data section's covers it)."""
     kind = Schema if data[pos] == Opcode.SCHEMA else Channel
     return kind.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
 
 
-def _footer(data: bytes) -> tuple[int, int, int] | None:
+def _footer(data: Data) -> tuple[int, int, int] | None:
     """(offset of the Footer record, summary_start, summary_crc), or None where the file has no Footer there."""
     footer = len(data) - 8 - _FOOTER
     if footer < 8 or data[-8:] != MAGIC or data[footer] != Opcode.FOOTER:
         return None
-    summary_start, _, summary_crc = struct.unpack_from("<QQI", data, footer + 9)
+    summary_start, _, summary_crc = _unpack("<QQI", data, footer + 9)
     return footer, summary_start, summary_crc
 
 
-def _chunk_records(data: bytes, pos: int, end: int) -> list[McapRecord] | None:
+def _chunk_records(data: Data, pos: int, end: int) -> list[McapRecord] | None:
     """The records of the chunk at `pos`, or None where it does not parse or fails its CRC."""
     try:
         chunk = Chunk.read(ReadDataStream(io.BytesIO(data[pos + 9 : end])))
@@ -89,7 +141,7 @@ def _chunk_records(data: bytes, pos: int, end: int) -> list[McapRecord] | None:
         return None
 
 
-def _resync(data: bytes, start: int) -> int | None:
+def _resync(data: Data, start: int) -> int | None:
     """The first offset >= start where an intact chunk or a DataEnd record begins (lengths and CRCs must hold)."""
     candidates = (bytes([Opcode.CHUNK]), bytes([Opcode.DATA_END]))
     pos = start
@@ -109,8 +161,9 @@ def _resync(data: bytes, start: int) -> int | None:
         pos = q + 1
 
 
-def intact_records(data: bytes) -> Scan:
-    """Every schema, channel and message of the data section that lies in an intact chunk (or outside chunks)."""
+def intact_records(data: Data, keep_messages: bool = True) -> Scan:
+    """Every schema, channel and message of the data section that lies in an intact chunk (or outside chunks); with
+    `keep_messages` false, the messages are checked and dropped (a check of a large log keeps none in memory)."""
     scan = Scan()
     if data[:8] != MAGIC:
         scan.damaged.append(Damage(0, "not the MCAP magic"))
@@ -144,7 +197,7 @@ def intact_records(data: bytes) -> Scan:
                 scan.schemas[r.id] = r
             elif isinstance(r, Channel):
                 scan.channels[r.id] = r
-            elif isinstance(r, Message):
+            elif isinstance(r, Message) and keep_messages:
                 scan.messages.append(r)
         pos = end
     return scan
@@ -153,8 +206,7 @@ def intact_records(data: bytes) -> Scan:
 def seal_data_crc(f: BinaryIO) -> None:
     """Write the data section's CRC into the DataEnd record of a finished MCAP file open for update (the ROS 2
     writer leaves it 0, "not computed", so a flipped byte between chunks would go unseen)."""
-    f.seek(0)
-    data = f.read()
+    data = FileView(f)
     found = _footer(data)
     if found is None:
         raise ValueError("no Footer record at the end")
@@ -162,11 +214,12 @@ def seal_data_crc(f: BinaryIO) -> None:
     data_end = (summary_start or footer) - 13
     if data_end < 8 or data[data_end] != Opcode.DATA_END:
         raise ValueError("no DataEnd record before the summary")
+    crc = crc_of(data, 0, data_end)
     f.seek(data_end + 9)
-    f.write(struct.pack("<I", zlib.crc32(data[:data_end])))
+    f.write(struct.pack("<I", crc))
 
 
-def _summary_definitions(data: bytes, pos: int, scan: Scan) -> None:
+def _summary_definitions(data: Data, pos: int, scan: Scan) -> None:
     """Schemas and channels repeated in the summary section (the writer repeats them), for those whose chunk is
     damaged; a damaged summary is reported by `check`, not here."""
     while (rec := _record_at(data, pos)) is not None and rec[0] != Opcode.FOOTER:
@@ -183,18 +236,18 @@ def _summary_definitions(data: bytes, pos: int, scan: Scan) -> None:
         pos = end
 
 
-def check(data: bytes, scan: Scan | None = None) -> list[Damage]:
+def check(data: Data, scan: Scan | None = None) -> list[Damage]:
     """Every damage in an MCAP file's bytes: magic, chunk CRCs, the data section's and the summary's CRC (`scan`:
     `intact_records(data)` if the caller has it already)."""
-    scan = scan if scan is not None else intact_records(data)
+    scan = scan if scan is not None else intact_records(data, keep_messages=False)
     damage = list(scan.damaged)
     if scan.data_end is None:
         damage.append(Damage(len(data), "no DataEnd record: the file is truncated"))
     else:
-        (length, crc) = struct.unpack_from("<QI", data, scan.data_end + 1)
+        (length, crc) = _unpack("<QI", data, scan.data_end + 1)
         if length != 4:
             damage.append(Damage(scan.data_end, "the DataEnd record's length is wrong"))
-        elif crc != 0 and crc != zlib.crc32(data[: scan.data_end]):
+        elif crc != 0 and crc != crc_of(data, 0, scan.data_end):
             damage.append(Damage(scan.data_end, "the data section's CRC does not match"))
     if len(data) < 8 + _FOOTER or data[-8:] != MAGIC:
         damage.append(Damage(max(0, len(data) - 8), "no closing MCAP magic: the file is truncated or damaged"))
@@ -206,6 +259,6 @@ def check(data: bytes, scan: Scan | None = None) -> list[Damage]:
     footer, summary_start, summary_crc = found
     if summary_start > footer or (summary_start and summary_start < (scan.data_end or 0)):
         damage.append(Damage(footer, "the Footer's summary offset is out of range"))
-    elif summary_crc != 0 and summary_crc != zlib.crc32(data[summary_start or footer : len(data) - 8 - 4]):
+    elif summary_crc != 0 and summary_crc != crc_of(data, summary_start or footer, len(data) - 8 - 4):
         damage.append(Damage(summary_start or footer, "the summary section's CRC does not match"))
     return damage

@@ -21,8 +21,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
-from stafpipe.errors import StafpipeError
+from stafpipe.errors import StafpipeError, yaml_problem
 
 IMAGE_SUFFIXES = (".pgm", ".png")
 
@@ -54,15 +55,23 @@ class OccupancyGrid:
         c, s = math.cos(yaw), math.sin(yaw)
         return np.stack([ox + c * local[..., 0] - s * local[..., 1], oy + s * local[..., 0] + c * local[..., 1]], -1)
 
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        """(P,) bool: the point lies in an occupied cell (points off the map: False)."""
+    def _cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Row and column (P,) of the cell under each point, and whether it is on the map."""
         ox, oy, yaw = self.origin
         c, s = math.cos(yaw), math.sin(yaw)
         dx, dy = points[:, 0] - ox, points[:, 1] - oy
         col = np.floor((c * dx + s * dy) / self.resolution).astype(int)
         row = np.floor((-s * dx + c * dy) / self.resolution).astype(int)
         h, w = self.occupied.shape
-        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        return row, col, (row >= 0) & (row < h) & (col >= 0) & (col < w)
+
+    def covers(self, points: np.ndarray) -> np.ndarray:
+        """(P,) bool: the point lies on one of the map's cells."""
+        return self._cells(points)[2]
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """(P,) bool: the point lies in an occupied cell (points off the map: False)."""
+        row, col, inside = self._cells(points)
         out = np.zeros(len(points), dtype=bool)
         out[inside] = self.occupied[row[inside], col[inside]]
         return out
@@ -92,6 +101,10 @@ class OccupancyGrid:
         return segments
 
 
+MIN_RESOLUTION = 0.005
+"""m per cell: a wall one cell thick must be thicker than the overlap the physics lets a contact have
+(`world.collision_slop`, 5 mm), or a robot pressed against it can come out on its other side; finer maps are
+downsampled first (map_server maps are usually 2.5-10 cm)."""
 MAX_MAP_PIXELS = 50_000_000
 """Pixels a map image may have (a 7,000 x 7,000 map: 350 m square at 5 cm); Pillow's own guard is a warning up to
 178 million and an exception name beyond."""
@@ -124,17 +137,29 @@ def _number(value: Any, where: str, low: float, high: float = math.inf, low_open
     return float(value)
 
 
+class _UniqueKeys(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key written twice: plain `safe_load` keeps the last value without a word, so a
+    map whose `resolution` is written twice would be read at the scale of whichever came last."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(None, None, f"found duplicate key {key}", key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
 def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
     """Read a `map_server` map YAML and its image; every error names the file and the field."""
-    import yaml
-
     path = Path(path)
     if not path.is_file():
         raise MapError(f"occupancy.map: map file {path} does not exist")
     try:
-        meta = yaml.safe_load(path.read_text())
+        meta = yaml.load(path.read_text(), Loader=_UniqueKeys)
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise MapError(f"map file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        raise MapError(f"map file {path}: not valid YAML ({yaml_problem(exc)})") from None
     if not isinstance(meta, dict):
         raise MapError(f"map file {path}: must be a mapping with image, resolution, origin, got {meta!r}")
     where = f"map file {path}"
@@ -145,6 +170,11 @@ def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
     if not image_path.is_file():
         raise MapError(f"{where}: image {image_path} does not exist")
     resolution = _number(_field(meta, "resolution", where), f"{where}: resolution", 0.0, low_open=True)
+    if resolution < MIN_RESOLUTION:
+        raise MapError(
+            f"{where}: resolution {resolution:g} m per cell is below {MIN_RESOLUTION:g}: a wall one cell thick would "
+            "be thinner than the overlap the physics allows a contact; downsample the image (and raise the resolution)"
+        )
     origin = _field(meta, "origin", where)
     if not isinstance(origin, list) or len(origin) not in (2, 3):
         raise MapError(f"{where}: origin must be [x, y, yaw], got {origin!r}")

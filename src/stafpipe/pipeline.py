@@ -23,7 +23,7 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.config import register_configs
-from stafpipe.errors import StafpipeError
+from stafpipe.errors import StafpipeError, yaml_problem
 from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, inputs_hash, launch
 from stafpipe.paths import conf_dir, pipelines_dir
 
@@ -72,8 +72,8 @@ def load_pipeline(path: Path, _including: tuple[str, ...] = ()) -> Pipeline:
     """Read and validate a pipeline file, with its includes expanded; errors name the file and the bad field."""
     try:
         raw = OmegaConf.to_container(OmegaConf.load(path))
-    except Exception as exc:  # any parse error becomes one clear message
-        raise StafpipeError(f"{path}: not valid YAML ({exc})") from exc
+    except Exception as exc:  # noqa: BLE001 - any parse error becomes one clear message
+        raise StafpipeError(f"{path}: not valid YAML ({yaml_problem(exc)})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("steps"), list) or not raw["steps"]:
         raise StafpipeError(f"{path}: needs a non-empty list 'steps'")
     unknown = set(raw) - {"name", "description", "steps"}

@@ -16,7 +16,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
-from stafpipe.errors import StafpipeError
+from stafpipe.errors import StafpipeError, yaml_problem
 from stafpipe.formations import FORMATION_TYPES, formation_slots, place
 from stafpipe.occupancy import OccupancyGrid, load_map
 from stafpipe.sections import section
@@ -236,6 +236,8 @@ def _keys(body: Any, required: set[str], optional: set[str], where: str) -> None
 
 def _check(spec: ScenarioConfig) -> None:
     w = spec.world
+    for key in ("xmin", "ymin", "xmax", "ymax"):
+        _number(getattr(w, key), f"world.{key}")
     if not (w.xmax > w.xmin and w.ymax > w.ymin):
         raise ScenarioError(f"world must have xmax > xmin and ymax > ymin, got {w}")
     _at_most(max(w.xmax - w.xmin, w.ymax - w.ymin), "world extent", "the world's longer side")
@@ -247,10 +249,15 @@ def _check(spec: ScenarioConfig) -> None:
     if t.formation not in FORMATION_TYPES:
         raise ScenarioError(f"team.formation must be one of {list(FORMATION_TYPES)}, got {t.formation!r}")
     _at_most(_positive(t.spacing, "team.spacing"), "team.spacing")
+    _number(t.heading_deg, "team.heading_deg")
+    if t.formation == "v" and not 0.0 < _number(t.angle_deg, "team.angle_deg") < 180.0:
+        raise ScenarioError(f"team.angle_deg (the v formation's apex angle) must be in (0, 180), got {t.angle_deg!r}")
     for key in ("start", "goal"):
         x, y = _vec2(getattr(t, key), f"team.{key}")
         if not (w.xmin < x < w.xmax and w.ymin < y < w.ymax):
-            raise ScenarioError(f"team.{key} {[x, y]} lies outside the world {w}")
+            raise ScenarioError(
+                f"team.{key} {[x, y]} lies outside the world (x {w.xmin:g}..{w.xmax:g}, y {w.ymin:g}..{w.ymax:g})"
+            )
     for key in ("radius", "max_speed", "max_accel", "max_turn_rate"):
         _at_most(_positive(getattr(r, key), f"robot.{key}"), f"robot.{key}")
     if math.dist(_vec2(t.start, "team.start"), _vec2(t.goal, "team.goal")) < 2 * r.radius:
@@ -359,7 +366,17 @@ def _map_obstacles(spec: ScenarioConfig, capsules: list[Capsule]) -> OccupancyGr
             slots = place(
                 formation_slots(t.formation, t.n, t.spacing, t.angle_deg), centre, math.radians(t.heading_deg)
             )
-        hit = grid.contains(np.vstack([centre, slots]))
+        points = np.vstack([centre, slots])
+        off = ~grid.covers(points)
+        if off.any():
+            who = "its centre" if off[0] else f"robot {int(np.argmax(off[1:]))}'s slot"
+            x0, y0, x1, y1 = grid.extent()
+            raise ScenarioError(
+                f"team.{key} {centre.tolist()}: {who} lies off map {occ.map}, which covers x {x0:g}..{x1:g}, "
+                f"y {y0:g}..{y1:g} ({grid.occupied.shape[1]} x {grid.occupied.shape[0]} cells of "
+                f"{grid.resolution:g} m: is its resolution right?)"
+            )
+        hit = grid.contains(points)
         if hit.any():
             where = "its centre" if hit[0] else f"robot {int(np.argmax(hit[1:]))}'s slot"
             raise ScenarioError(f"team.{key} {centre.tolist()}: {where} lies in an occupied cell of map {occ.map}")
@@ -440,7 +457,7 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
     try:
         raw = OmegaConf.load(path)
     except Exception as exc:  # noqa: BLE001 - a YAML syntax error
-        raise ScenarioError(f"scenario file {path}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        raise ScenarioError(f"scenario file {path}: not valid YAML ({yaml_problem(exc)})") from None
     _required_sections(raw, path)
     try:
         merged = OmegaConf.merge(OmegaConf.structured(ScenarioConfig), raw)

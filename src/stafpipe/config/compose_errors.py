@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import difflib
 import re
+import unicodedata
 from collections.abc import Sequence
 
-from hydra.errors import HydraException, MissingConfigException
+from hydra.errors import HydraException, MissingConfigException, OverrideParseException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
@@ -47,6 +48,8 @@ def explain(exc: BaseException, stage: str, overrides: Sequence[str]) -> str:
         hint = f" (did you mean {group}={close[0]}?)" if close else ""
         return f"{group}={option}: no such {group}{hint}; choose one of: {', '.join(choices)}"
     text = str(exc)
+    if isinstance(exc, OverrideParseException):
+        return _unparsable(overrides, text)
     missing = re.search(r"Could not (?:override|append to|delete) '([^']+)'", text) or re.search(
         r"Key '([^']+)' (?:is not in struct|not in)", text
     )  # Hydra's wording (1.3)
@@ -87,3 +90,29 @@ def _did_you_mean(cfg: DictConfig | None, key: str) -> str:
         node, path = child, [*path, part]
     close = difflib.get_close_matches(parts[-1], [str(k) for k in node], n=1)
     return f" (did you mean {'.'.join([*path, close[0]])}?)" if close else ""
+
+
+def _unparsable(overrides: Sequence[str], text: str) -> str:
+    """Which override Hydra's grammar cannot read, and why, instead of the parser's exception name: a character
+    outside the grammar's (a letter with an accent, a full-width digit) is allowed only inside a quoted value."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create()
+    for override in overrides:
+        if override in ("-m", "--multirun") or override.startswith("-"):
+            continue
+        try:
+            parser.parse_overrides([override])
+        except OverrideParseException:
+            key, _, value = override.partition("=")
+            odd = next((c for c in override if not c.isascii()), None)
+            if odd is not None and odd in key:
+                return f"{override}: a key is a dotted name of ASCII letters, digits and _ (found {odd!r})"
+            plain = unicodedata.normalize("NFKC", value)  # full-width digits and letters to ASCII
+            if odd is not None and plain.isascii():
+                return f"{override}: {odd!r} is not an ASCII character (did you mean {key}={plain}?)"
+            if odd is not None:
+                return f"{override}: {odd!r} may appear only in a quoted value: {key}='{value}'"
+            reason = text.strip().splitlines()[0].split(": ", 1)[0]
+            return f"{override}: not an override Hydra's grammar can read ({reason}); quote the value: {key}='{value}'"
+    return text.strip().splitlines()[0]
