@@ -56,7 +56,9 @@ def test_a_rerun_into_an_earlier_runs_directory_keeps_none_of_its_episodes(workd
     assert launch("eval", ["method=straight", "scenario=corridor", "eval.episodes=3", f"hydra.run.dir={run}"]) == 0
     (run / "episodes" / "episode_0099.mcap").write_bytes(b"left by a killed run")  # an episode the rerun will not write
     (run / "episodes" / "episode_0100.mcap.part").write_bytes(b"")
+    (run / ".results.csv.tmp-4242").write_text("a table a killed run was writing")
     (run / "notes.txt").write_text("the user's own")
     assert launch("eval", ["method=straight", "scenario=corridor", "eval.episodes=2", f"hydra.run.dir={run}"]) == 0
     assert sorted(p.name for p in (run / "episodes").iterdir()) == ["episode_0000.mcap", "episode_0001.mcap"]
+    assert not list(run.glob(".*.tmp-*"))
     assert (run / "notes.txt").read_text() == "the user's own"

@@ -73,3 +73,20 @@ def test_train_high_on_a_generated_file_and_bad_inputs(workdir) -> None:
     assert launch("train-high", [*TINY, "train_high.data=nowhere.parquet"]) == 2
     assert launch("train-high", [*TINY, "train_high.m_choices=[2,7]"]) == 2
     assert len(job_dirs(workdir / "outputs")) == 1
+
+
+def test_a_resumed_run_keeps_one_event_file_with_each_step_once(tmp_path) -> None:
+    """A killed training leaves its event file; the resumed session replaces it by one file holding the whole
+    history (the rows it took over and its own), so TensorBoard shows each step once."""
+    from stafpipe.tensorboard_log import TB_DIR, ScalarLog
+
+    rows = [{"epoch": k, "train_total": 1.0 / k} for k in (1, 2, 3)]
+    first = ScalarLog(tmp_path, "epoch")
+    first.sync(rows[:1])
+    first.sync(rows[:2])
+    first.close()  # killed after epoch 2: its file stays behind
+    resumed = ScalarLog(tmp_path, "epoch")
+    resumed.sync(rows)
+    resumed.close()
+    assert len(list((tmp_path / TB_DIR).glob("events.out.tfevents.*"))) == 1
+    assert tensorboard_scalars(tmp_path)["train/total"] == [(k, pytest.approx(1.0 / k)) for k in (1, 2, 3)]

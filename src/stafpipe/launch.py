@@ -220,6 +220,7 @@ def stage_task(cfg: DictConfig) -> None:
     try:
         lock.acquire()  # refused: the directory is another run's, so nothing in it is touched
         check_run_config(cfg)
+        _remove_partials(out_dir)  # a killed run's unfinished files are never valid, resumable stage or not
         if not resumable and _clear_outputs(out_dir):
             log.warning("%s held files of an earlier run of this stage; removed, the run starts over", out_dir)
         inputs = inputs_hash(cfg)  # before the stage: what it read, not what it wrote

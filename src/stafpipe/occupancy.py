@@ -154,6 +154,8 @@ class _UniqueKeys(yaml.SafeLoader):
 def load_map(path: str | Path, unknown: str = "occupied") -> OccupancyGrid:
     """Read a `map_server` map YAML and its image; every error names the file and the field."""
     path = Path(path)
+    if path.is_dir():
+        raise MapError(f"occupancy.map: {path} is a directory; name the map's YAML file in it")
     if not path.is_file():
         raise MapError(f"occupancy.map: map file {path} does not exist")
     try:

@@ -64,6 +64,8 @@ def find_pipeline(name_or_path: str) -> Path:
     for path in candidates:
         if path.is_file():
             return path
+    if Path(name_or_path).is_dir():
+        raise StafpipeError(f"{name_or_path} is a directory, not a pipeline file (a YAML file with `steps`)")
     shipped = sorted(p.stem for p in pipelines_dir().glob("*.yaml"))
     raise StafpipeError(f"no pipeline '{name_or_path}' (a file, or one of: {', '.join(shipped)})")
 

@@ -22,6 +22,10 @@ def save_payload(path: Path, payload: dict[str, Any]) -> Path:
 def load_payload(path: Path, error: type[StafpipeError], what: str, hint: str = "") -> Any:
     """The plain data in a torch file (`weights_only`: no code runs); `error` naming the file if it is missing or
     damaged."""
+    if path.is_dir():
+        inside = sorted(q.name for q in path.glob("*.pt"))
+        example = f" (it holds {', '.join(inside[:3])})" if inside else ""
+        raise error(f"{path} is a directory, not a {what}; name the file{example}")
     if not path.is_file():
         raise error(f"{path}: no such {what}" + (f" ({hint})" if hint else ""))
     try:

@@ -60,7 +60,7 @@ def train(
     out_dir: Path,
     config_hash: str,
     made_by: dict[str, Any],
-    on_epoch: Callable[[dict[str, float]], None] | None = None,
+    on_epoch: Callable[[list[dict[str, float]]], None] | None = None,
 ) -> tuple[DeepGraphCut, list[dict[str, float]]]:
     """Train on `graphs`; after every epoch the whole state goes to `out_dir/last.pt`, so a rerun of the same config in
     the same directory continues where a killed one stopped and ends with the same weights as an uninterrupted run."""
@@ -120,7 +120,7 @@ def train(
         }
         save_payload(state_path, state)
         if on_epoch is not None:
-            on_epoch(row)
+            on_epoch(history)
         after_epoch(epoch + 1)
     made_by = {
         **made_by,

@@ -69,7 +69,7 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     made_by = {"data": tc.data or "generated in memory from `data`", "teams": len(graphs)}
     board = ScalarLog(out_dir, "epoch")
     try:
-        _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by, board.write)
+        _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by, board.sync)
     finally:
         board.close()
     outputs = [out_dir / "high_level.pt", out_dir / "last.pt"]

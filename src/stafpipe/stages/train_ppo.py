@@ -117,7 +117,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
 
     def on_iteration(history: list[dict[str, float]]) -> None:
         write_table(pd.DataFrame(history), curves)
-        board.write(history[-1])
+        board.sync(history)
 
     try:
         policy, history = train_ppo(
