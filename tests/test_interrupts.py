@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from stafpipe.launch import launch
@@ -62,3 +63,22 @@ def test_a_rerun_into_an_earlier_runs_directory_keeps_none_of_its_episodes(workd
     assert sorted(p.name for p in (run / "episodes").iterdir()) == ["episode_0000.mcap", "episode_0001.mcap"]
     assert not list(run.glob(".*.tmp-*"))
     assert (run / "notes.txt").read_text() == "the user's own"
+
+
+@pytest.mark.slow  # a subprocess that imports the package and runs episodes: about 8 s
+def test_a_sigkilled_eval_then_a_rerun_leaves_only_the_reruns_results(tmp_path) -> None:
+    """SIGKILL gives the run no chance to clean up: its lock, `.part` logs and finished episodes stay behind. The same
+    command again takes the directory over (the lock's process is dead), removes all of it, and ends with the results
+    and logs of its own episodes only."""
+    run = tmp_path / "run"
+    words = ["eval", "method=straight", "scenario=corridor", "eval.batch=1", f"hydra.run.dir={run}"]
+    proc = subprocess.Popen([sys.executable, "-m", "stafpipe", *words, "eval.episodes=200"], cwd=tmp_path)
+    assert _episodes_started(run), "the run never began its episodes"
+    time.sleep(1.0)
+    proc.kill()
+    proc.wait(timeout=60)
+    assert not (run / "stage.json").exists()
+    assert launch("eval", [*words[1:], "eval.episodes=2"]) == 0
+    assert sorted(p.name for p in (run / "episodes").iterdir()) == ["episode_0000.mcap", "episode_0001.mcap"]
+    assert not list(run.rglob("*.part")) and not list(run.glob(".*.tmp-*"))
+    assert (run / "stage.json").is_file() and len(pd.read_parquet(run / "results.parquet")) == 2
