@@ -151,10 +151,16 @@ class SubteamPlan:
         return goal
 
     def _update_shape(self) -> None:
+        """What stays the same until the next release or the regroup: who waits, who shares a subteam, R^adp's
+        distances, and each moving subteam's slot offsets (`slot_offsets`), so that `step` only carries them."""
         waiting = self._waiting()
         self.same = self.labels[:, None] == self.labels[None, :]
         shape = np.where(waiting[:, None], self.hold, self.goal)
         self.expected = np.linalg.norm(shape[:, None] - shape[None], axis=-1) * self.same
+        self._moving = []
+        for k in np.unique(self.labels[~waiting]):
+            members = self.labels == k
+            self._moving.append((members, self.goal[members], *slot_offsets(self.goal[members], self.heading)))
 
     def _waiting(self) -> np.ndarray:
         """(n,) robots of subteams not yet let go (rule 5)."""
@@ -180,11 +186,9 @@ class SubteamPlan:
             self._update_shape()
         target = self.hold.copy()
         self.centre = self.hold.copy()  # each robot's (sub)team's carried centre, for the teacher (`free_aim`)
-        waiting = self._waiting()
-        for k in np.unique(self.labels[~waiting]):
-            members = self.labels == k
-            target[members], self.centre[members] = carried_goal(
-                self.progress[members], self.frame, self.goal[members], self.cfg.lookahead, self.heading
+        for members, goal, centre, offset, along in self._moving:
+            target[members], self.centre[members] = carry(
+                self.progress[members], self.frame, goal, centre, offset, along, self.cfg.lookahead, self.heading
             )
         return target
 
@@ -205,12 +209,31 @@ def carried_goal(
     between teammates' targets are those of their goal slots (STAF's s_j - s_i compares goals); a robot left behind a
     wall aims along the route from where it is, not at a point beyond the wall; and no goal lies round a corner the
     network cannot see round."""
+    return carry(progress, frame, goal, *slot_offsets(goal, heading), lookahead, heading)
+
+
+def slot_offsets(goal: np.ndarray, heading: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`carried_goal`'s parts that depend on the goal slots alone: their centre (2,), each slot's offset from it
+    (k, 2) and its place along the way (k,), ahead positive."""
+    centre = goal.mean(axis=0)
+    offset = goal - centre
+    return centre, offset, offset @ [math.cos(heading), math.sin(heading)]
+
+
+def carry(
+    progress: np.ndarray,
+    frame: PathFrame,
+    goal: np.ndarray,
+    goal_centre: np.ndarray,
+    offset: np.ndarray,
+    along: np.ndarray,
+    lookahead: float,
+    heading: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`carried_goal` with the slots' `slot_offsets` computed beforehand."""
     mean = float(progress.mean())
-    goal_centre = goal.mean(axis=0)
     if frame.length - mean <= lookahead:
         return goal, np.broadcast_to(goal_centre, goal.shape)
-    offset = goal - goal_centre
-    along = offset @ [math.cos(heading), math.sin(heading)]  # the slot's place along the way, ahead positive
     point, direction = frame.at(np.minimum(progress - along, mean) + lookahead)
     turn = direction - heading
     c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
