@@ -240,3 +240,20 @@ def test_the_report_carries_its_figures_so_its_links_resolve(tmp_path) -> None:
     text = (out / "REPRODUCTION.md").read_text()
     link = "figures/reproduction/staf_table1-fig4-circle-trajectories_episode_0000.png"
     assert f"({link})" in text and (out / link).read_bytes() == b"\x89PNG fake"
+
+
+def test_the_line_of_nine_reads_three_subteams_only_where_its_episodes_show_them(tmp_path) -> None:
+    """Fig. 11(c): the row counts the episodes of `method=staf` on multi_passage with exactly three subteams; 80 of 80
+    hold (Wilson's lower bound 95.4 %), 20 of 20 only partly (83.9 %: too few to show it), 72 of 80 do not."""
+    from stafpipe.report.claims_staf_paper import paper_staf_claims
+
+    [claim] = [c for c in paper_staf_claims() if c.statement.startswith("a line of nine")]
+    base = {"method": "staf", "label": "", "scenario": "multi_passage", "formation": "line", "n": 9}
+    three = [{**base, "drive": "holonomic", "episode": i, "sr": 1.0, "subteams_max": 3} for i in range(80)]
+    [row] = judge_all(gather([type(tmp_path)(_eval_run(tmp_path, "all", three))]), [claim])
+    assert row.verdict == HOLDS and row.measured.ours.value == 100.0
+    [row] = judge_all(gather([type(tmp_path)(_eval_run(tmp_path, "few", three[:20]))]), [claim])
+    assert row.verdict == PARTLY
+    some = [{**r, "subteams_max": 2 if r["episode"] < 8 else 3} for r in three]
+    [row] = judge_all(gather([type(tmp_path)(_eval_run(tmp_path, "some", some))]), [claim])
+    assert row.verdict == FAILS and row.measured.ours.value == pytest.approx(90.0)

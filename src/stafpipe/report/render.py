@@ -10,12 +10,13 @@ import pandas as pd
 from stafpipe.report.claims import Claim, Row, judge
 from stafpipe.report.claims_others import cezayirli_claims, zhu_claims
 from stafpipe.report.claims_staf import staf_claims
+from stafpipe.report.claims_staf_paper import paper_staf_claims
 from stafpipe.report.evidence import Evidence
 from stafpipe.report.verdicts import FAILS, HOLDS, MISSING, PARTLY
 
 
 def all_claims() -> list[Claim]:
-    return [*staf_claims(), *zhu_claims(), *cezayirli_claims()]
+    return [*staf_claims(), *paper_staf_claims(), *zhu_claims(), *cezayirli_claims()]
 
 
 def judge_all(evidence: Evidence, claims: list[Claim] | None = None) -> list[Row]:
