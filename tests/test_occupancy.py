@@ -168,3 +168,14 @@ def test_staf_crosses_the_office_map(workdir) -> None:
     [run] = job_dirs(workdir)
     results = pd.read_parquet(run / "results.parquet")
     assert (results.sr == 1.0).all() and (results.collisions == 0).all()
+
+
+def test_a_map_file_keeps_yaml_merge_keys_and_refuses_a_key_written_twice(tmp_path) -> None:
+    from stafpipe.occupancy import MapError, load_map
+
+    (tmp_path / "m.pgm").write_bytes(bytes.fromhex("50350a3220320a3235350affffffff"))
+    (tmp_path / "ok.yaml").write_text("base: &b {resolution: 0.05, origin: [0, 0, 0]}\n<<: *b\nimage: m.pgm\n")
+    assert load_map(tmp_path / "ok.yaml").resolution == 0.05
+    (tmp_path / "twice.yaml").write_text("image: m.pgm\nresolution: 1.0\norigin: [0, 0, 0]\nresolution: 0.05\n")
+    with pytest.raises(MapError, match="found duplicate key resolution at line 4"):
+        load_map(tmp_path / "twice.yaml")

@@ -150,7 +150,7 @@ def fs_fault(exc: BaseException | None, where: Path | None = None) -> str | None
 def _remove_partials(out_dir: Path) -> None:
     """Files a failed run was still writing: episode logs (`*.part`) and atomic writes' temporaries (`.*.tmp-*`)."""
     if out_dir.is_dir():
-        for p in [*out_dir.rglob("*.part"), *out_dir.rglob(".*.tmp-*")]:
+        for p in [*out_dir.glob("episodes/*.part"), *out_dir.rglob(".*.tmp-*")]:
             with contextlib.suppress(OSError):
                 p.unlink()
 

@@ -32,32 +32,50 @@ BLOCK = 1 << 20
 
 class FileView:
     """A file's bytes, read only where they are asked for, with the parts of the `bytes` interface the scan uses
-    (len, an index, a slice, find): `check` walks a log of any size in memory bounded by its largest record."""
+    (len, an index, a slice, find): `check` walks a log of any size in memory bounded by its largest record. The
+    last block read is kept, so that the many short reads and searches of a resync over a damaged stretch cost what
+    they cost on `bytes`."""
 
     def __init__(self, f: BinaryIO) -> None:
         self.f = f
         self.size = os.fstat(f.fileno()).st_size
+        self._start, self._block = 0, b""
 
     def __len__(self) -> int:
         return self.size
 
+    def _cover(self, start: int, stop: int) -> int:
+        """Keep bytes start..stop in the block; their offset in it."""
+        if not (self._start <= start and stop <= self._start + len(self._block)):
+            self._start = start - start % BLOCK
+            self.f.seek(self._start)
+            self._block = self.f.read(max(stop, self._start + 2 * BLOCK) - self._start)
+        return start - self._start
+
+    def _read(self, start: int, stop: int) -> bytes:
+        at = self._cover(start, stop)
+        return self._block[at : at + stop - start]
+
     def __getitem__(self, key: int | slice) -> Any:
         if isinstance(key, slice):
             start, stop, _ = key.indices(self.size)
-            self.f.seek(start)
-            return self.f.read(max(0, stop - start))
+            if stop - start > BLOCK:  # a chunk or a whole record: read it alone, keep the block
+                self.f.seek(start)
+                return self.f.read(stop - start)
+            return self._read(start, max(start, stop))
         index = key + self.size if key < 0 else key
         if not 0 <= index < self.size:
             raise IndexError(key)
-        self.f.seek(index)
-        return self.f.read(1)[0]
+        return self._read(index, index + 1)[0]
 
     def find(self, sub: bytes, start: int = 0) -> int:
-        pos = start
+        pos = max(start, 0)
         while pos < self.size:
-            found = self[pos : pos + BLOCK + len(sub) - 1].find(sub)
+            stop = min(pos + BLOCK + len(sub) - 1, self.size)
+            at = self._cover(pos, stop)
+            found = self._block.find(sub, at, at + stop - pos)
             if found >= 0:
-                return pos + found
+                return self._start + found
             pos += BLOCK
         return -1
 

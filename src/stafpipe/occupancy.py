@@ -144,10 +144,17 @@ class _UniqueKeys(yaml.SafeLoader):
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         seen = set()
         for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":  # `<<: *base`: the safe loader merges it below
+                continue
             key = self.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise yaml.constructor.ConstructorError(None, None, f"found duplicate key {key}", key_node.start_mark)
-            seen.add(key)
+            try:
+                if key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"found duplicate key {key}", key_node.start_mark
+                    )
+                seen.add(key)
+            except TypeError:  # an unhashable key: the safe loader refuses it with its own message
+                continue
         return super().construct_mapping(node, deep)
 
 

@@ -70,6 +70,7 @@ def run_train_high(cfg: DictConfig, out_dir: Path) -> list[Path]:
     board = ScalarLog(out_dir, "epoch")
     try:
         _, history = train(graphs, high, tc, int(cfg.seed), out_dir, config_hash(cfg), made_by, board.sync)
+        board.sync(history)  # a resumed run with no epoch left to train writes the history it took over
     finally:
         board.close()
     outputs = [out_dir / "high_level.pt", out_dir / "last.pt"]

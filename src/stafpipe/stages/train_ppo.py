@@ -133,6 +133,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
             on_iteration,
             validation,
         )
+        board.sync(history)  # a resumed run with no iteration left to train writes the history it took over
     finally:
         board.close()
     made_by = {
