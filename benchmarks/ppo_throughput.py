@@ -19,10 +19,10 @@ import time
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from stafpipe.learning.adapters import ADAPTERS
 from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.ppo import teams_of, update
+from stafpipe.learning.registry import ADAPTERS
 from stafpipe.learning.rollout import collect, gae
 from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig

@@ -18,10 +18,10 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
     episode on the corridor driven towards the adapter's aim (robots close up, neighbours come and go)."""
     import dataclasses
 
-    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.checkpoint import load_policy
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import teams_of
+    from stafpipe.learning.registry import adapter_class
     from stafpipe.learning.rollout import commands
     from stafpipe.learning.teachers import teacher_actions
     from stafpipe.scenario import build_scenario

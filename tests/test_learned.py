@@ -24,9 +24,9 @@ from stafpipe.controllers.staf import StafMethodConfig
 from stafpipe.episode import episode_context
 from stafpipe.geometry import Geometry
 from stafpipe.launch import launch
-from stafpipe.learning.adapters import ADAPTERS, adapter_class
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
+from stafpipe.learning.registry import ADAPTERS, adapter_class
 from stafpipe.learning.teachers import AVOID_GAIN, SLIDE_MARGIN, off_the_wall, teacher_actions
 from stafpipe.scenario import TeamSpec, WorldBounds, build_scenario
 from stafpipe.scenario_pool import load_named_scenario

@@ -192,9 +192,9 @@ def test_init_from_starts_at_the_loaded_weights_and_refuses_other_settings(tmp_p
 
 
 def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) -> None:
-    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import _teacher_samples
+    from stafpipe.learning.registry import adapter_class
 
     tc = TrainPPOConfig(
         worlds=1,
@@ -243,9 +243,9 @@ def test_wall_copies_add_relabelled_near_wall_states() -> None:
     """`imitation.wall_copies=1`: each collected step gets a copy whose robots all have a wall point 0-0.4 m from
     their surface, at a random bearing, labelled with the teacher's (braking) action on that copy; the real samples
     are those of a run without copies."""
-    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import _teacher_samples
+    from stafpipe.learning.registry import adapter_class
     from stafpipe.learning.teachers import NEAR_WALL_GAP
 
     im = ImitationConfig(epochs=1, teacher="avoiding", noise=0.0, wall_copies=1.0)
@@ -359,8 +359,8 @@ def test_drive_input_and_direction_weight_are_checked() -> None:
 def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error() -> None:
     """The update reads its losses once, after its minibatches (not at each, which waits for a GPU); a NaN there
     stops training rather than saving NaN weights."""
-    from stafpipe.learning.adapters import adapter_class
     from stafpipe.learning.dgnn import DGNNPolicy
+    from stafpipe.learning.registry import adapter_class
     from stafpipe.learning.rollout import collect
     from stafpipe.world import Worlds
 

@@ -15,11 +15,11 @@ from functools import cached_property
 from typing import Any
 
 import numpy as np
-from matplotlib.path import Path as MplPath
 from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from stafpipe.distances import capsule_parts, closest_points, distance_to, inside_is_zero
 from stafpipe.scenario import Scenario
 
 CHUNK_BYTES = 256 * 2**20
@@ -28,40 +28,17 @@ a map of 10,000 small obstacles asked for 3.35 GiB in one piece."""
 
 
 def capsule_arrays(scenario: Scenario) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Static obstacles as arrays: segment starts (C, 2), ends (C, 2), radii (C,)."""
-    a = np.array([c.a for c in scenario.capsules], dtype=float)
-    b = np.array([c.b for c in scenario.capsules], dtype=float)
-    r = np.array([c.radius for c in scenario.capsules], dtype=float)
-    return a, b, r
-
-
-def closest_points(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Closest point on each segment a-b to each point p: p (..., P, 2), a and b (..., C, 2) -> (..., P, C, 2)."""
-    ab = b - a
-    denom = np.maximum(np.einsum("...ci,...ci->...c", ab, ab), 1e-12)
-    ap = p[..., :, None, :] - a[..., None, :, :]
-    t = np.clip(np.einsum("...pci,...ci->...pc", ap, ab) / denom[..., None, :], 0.0, 1.0)
-    return a[..., None, :, :] + t[..., None] * ab[..., None, :, :]
+    """A scenario's static obstacles as arrays: segment starts (C, 2), ends (C, 2), radii (C,)."""
+    return capsule_parts(scenario.capsules)
 
 
 def obstacle_distance(points: np.ndarray, scenario: Scenario) -> np.ndarray:
     """Distance (P,) from each point to the nearest static obstacle surface; 0 inside a solid polygon."""
-    a, b, r = capsule_arrays(scenario)
-    d = np.full(len(points), np.inf)
-    for start in range(0, len(points), 20_000):  # chunks keep the (P, C, 2) temporary small
-        chunk = points[start : start + 20_000]
-        cp = closest_points(chunk, a, b)
-        d[start : start + 20_000] = (np.linalg.norm(chunk[:, None, :] - cp, axis=-1) - r).min(axis=1)
-    return _inside_is_zero(d, points, scenario)
+    return distance_to(points, scenario.capsules, scenario.polygons, scenario.occupancy)
 
 
 def _inside_is_zero(d: np.ndarray, points: np.ndarray, scenario: Scenario) -> np.ndarray:
-    """Distances (P,) to the capsules, 0 where a point lies inside a solid polygon or an occupied map cell."""
-    for poly in scenario.polygons:
-        d[MplPath(poly).contains_points(points)] = 0.0
-    if scenario.occupancy is not None:  # inside a wall of a ROS map: its cells, not its outline, say so
-        d[scenario.occupancy.contains(points)] = 0.0
-    return np.maximum(d, 0.0)
+    return inside_is_zero(d, points, scenario.polygons, scenario.occupancy)
 
 
 def grid_clearance(xs: np.ndarray, ys: np.ndarray, scenario: Scenario, block: int = 8) -> np.ndarray:

@@ -29,6 +29,7 @@ from omegaconf import DictConfig, OmegaConf
 from stafpipe import __version__
 from stafpipe.config import register_configs
 from stafpipe.config.checks import check_run_config
+from stafpipe.config.compose import compose_config, config_name
 from stafpipe.errors import StafpipeError
 from stafpipe.interrupt import stop_at_boundaries
 from stafpipe.io import atomic_write, write_json
@@ -48,11 +49,6 @@ STAGE_FUNCTIONS: dict[str, str] = {
     "train-ppo": "stafpipe.stages.train_ppo:run_train_ppo",
 }
 MARKER = "stage.json"
-
-
-def config_name(stage: str) -> str:
-    """The primary config file (without .yaml) of `stage`: `train-high` -> `train_high`."""
-    return stage.replace("-", "_")
 
 
 def config_hash(cfg: DictConfig) -> str:
@@ -288,7 +284,6 @@ def _config_problem(stage: str, overrides: Sequence[str]) -> str | None:
     from omegaconf.errors import OmegaConfBaseException
 
     from stafpipe.config.compose_errors import explain, jobs_to_check
-    from stafpipe.pipeline import compose_config
 
     try:
         for job in jobs_to_check(overrides) or []:

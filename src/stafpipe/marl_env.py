@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from stafpipe.learning.adapters import ADAPTERS, adapter_class
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.ppo import teams_of
+from stafpipe.learning.registry import ADAPTERS, adapter_class
 from stafpipe.learning.rollout import commands, episode_stats, step_reward, world_routes
 from stafpipe.scenario import build_scenario
 from stafpipe.sensing import SensingConfig

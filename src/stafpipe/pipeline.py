@@ -18,14 +18,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from hydra import compose, initialize_config_dir
-from hydra.core.global_hydra import GlobalHydra
 from omegaconf import DictConfig, OmegaConf
 
-from stafpipe.config import register_configs
+from stafpipe.config.compose import compose_config
 from stafpipe.errors import StafpipeError, yaml_problem
-from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, config_name, inputs_hash, launch
-from stafpipe.paths import conf_dir, pipelines_dir
+from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, inputs_hash, launch
+from stafpipe.paths import pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
 _STEP_REF = re.compile(r"\{steps\.([A-Za-z0-9_.-]+)\.dir\}")
@@ -127,14 +125,6 @@ def _included(name: str, where: str, including: tuple[str, ...]) -> list[Pipelin
         overrides = [_STEP_REF.sub(rename, o) for o in step.overrides]
         out.append(PipelineStep(prefix + step.name, step.stage, overrides, inner.name, i))
     return out
-
-
-def compose_config(stage: str, overrides: list[str]) -> DictConfig:
-    """The job config `stage` would run with these overrides (Hydra's compose API)."""
-    register_configs()
-    GlobalHydra.instance().clear()
-    with initialize_config_dir(config_dir=str(conf_dir()), version_base="1.3"):
-        return compose(config_name=config_name(stage), overrides=overrides)
 
 
 def _is_done(run_dir: Path, digest: str, inputs: str | None = None) -> bool:

@@ -16,6 +16,7 @@ import yaml
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from stafpipe.distances import distance_to
 from stafpipe.errors import StafpipeError, yaml_problem
 from stafpipe.formations import FORMATION_TYPES, formation_slots, place
 from stafpipe.occupancy import OccupancyGrid, load_map
@@ -318,8 +319,6 @@ def build_scenario(spec: ScenarioConfig) -> Scenario:
 def _check_placement(scenario: Scenario) -> None:
     """Every robot's slot at the start and at the goal (placed as World.reset places them) lies inside the world and
     clear of every obstacle: a team placed outside its world once ran with exit 0 and SR 1.0."""
-    from stafpipe.geometry import obstacle_distance
-
     spec = scenario.spec
     t, r, w = spec.team, spec.robot.radius, spec.world
     unit = formation_slots(t.formation, t.n, t.spacing, t.angle_deg)
@@ -333,7 +332,7 @@ def _check_placement(scenario: Scenario) -> None:
                 f"team.{key}: robot {k}'s slot {np.round(slots[k], 2).tolist()} lies outside the world {w} "
                 f"(team.n {t.n}, spacing {t.spacing}: the formation does not fit)"
             )
-        clear = obstacle_distance(slots, scenario) - r
+        clear = distance_to(slots, scenario.capsules, scenario.polygons, scenario.occupancy) - r
         if (clear < -1e-6).any():
             k = int(np.argmin(clear))
             raise ScenarioError(

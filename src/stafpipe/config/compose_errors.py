@@ -13,6 +13,8 @@ from hydra.errors import HydraException, MissingConfigException, OverrideParseEx
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
+from stafpipe.config.compose import compose_config
+
 
 def jobs_to_check(overrides: Sequence[str]) -> list[list[str]] | None:
     """Overrides of jobs that together try every value a command line gives: the first job (a sweep's first value
@@ -39,8 +41,6 @@ def jobs_to_check(overrides: Sequence[str]) -> list[list[str]] | None:
 
 def explain(exc: BaseException, stage: str, overrides: Sequence[str]) -> str:
     """One message for a config that does not compose."""
-    from stafpipe.pipeline import compose_config
-
     if isinstance(exc, MissingConfigException) and exc.missing_cfg_file and "/" in exc.missing_cfg_file:
         group, _, option = exc.missing_cfg_file.rpartition("/")
         choices = sorted(o for o in (exc.options or []) if not o.startswith("base_"))

@@ -16,9 +16,9 @@ import torch
 from stafpipe.controllers.base import STOP_GAP, Controller, Event, TeamInfo, forward_capped, limit_approach
 from stafpipe.controllers.orca import avoid_movers
 from stafpipe.errors import StafpipeError
-from stafpipe.learning.adapters import adapter_class
 from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
 from stafpipe.learning.config import RewardConfig
+from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import AVOID_DISTANCE, AVOID_GAIN, teacher_actions
 from stafpipe.sensing import Observation

@@ -10,7 +10,6 @@ method-name branches: a new learned method is a network file, an adapter here an
 from __future__ import annotations
 
 import dataclasses
-import importlib
 from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
@@ -225,18 +224,3 @@ def staf_penalties(
     near = np.clip(1.0 - gap / rc.safe_distance, 0.0, 1.0).sum(-1)
     near += np.clip(1.0 - obs.obstacle_distance / rc.safe_distance, 0.0, 1.0)
     return rc.formation * adp - rc.proximity * near
-
-
-ADAPTERS: dict[str, str] = {
-    "dgnn": "stafpipe.learning.adapters:DGNNAdapter",
-    "staf_planned": "stafpipe.learning.adapters:StafPlannedAdapter",
-    "staf": "stafpipe.methods.staf.adapter:StafAdapter",
-}
-"""Learned methods by name (`train_ppo.method`, the `method` of a policy checkpoint): where each adapter lives, imported
-when first used (a method's package imports this module, never the other way)."""
-
-
-def adapter_class(name: str) -> type[Adapter]:
-    """The adapter of learned method `name` (a key of ADAPTERS)."""
-    module, _, attr = ADAPTERS[name].partition(":")
-    return getattr(importlib.import_module(module), attr)

@@ -17,7 +17,7 @@ FORMAT = "stafpipe.policy/1"
 
 def build_policy(method: str, cfg: PolicyConfig) -> PolicyNet:
     """A fresh policy network of the learned method `method` (its adapter names the network)."""
-    from stafpipe.learning.adapters import adapter_class
+    from stafpipe.learning.registry import adapter_class
 
     return adapter_class(method).network(cfg)
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
+from stafpipe.learning.registry import ADAPTERS
 from stafpipe.methods.staf.subteaming import SubteamingConfig
 
 
@@ -189,8 +190,6 @@ class TrainPPOConfig:
     trained under; an eval of `method=staf` must use the same settings."""
 
     def check(self, key: str = "train_ppo") -> None:
-        from stafpipe.learning.adapters import ADAPTERS
-
         require(self.method in ADAPTERS, f"{key}.method", f"must be one of {sorted(ADAPTERS)}", self.method)
         im = self.imitation
         require(

@@ -23,10 +23,11 @@ import torch
 
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.errors import StafpipeError
-from stafpipe.learning.adapters import Adapter, adapter_class
+from stafpipe.learning.adapters import Adapter
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.learning.features import Features
 from stafpipe.learning.policy_net import PolicyNet
+from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import Rollout, collect, commands, gae
 from stafpipe.learning.teachers import near_neighbour_copy, near_wall_copy, teacher_actions
 from stafpipe.progress import progress
