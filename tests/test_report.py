@@ -257,3 +257,18 @@ def test_the_line_of_nine_reads_three_subteams_only_where_its_episodes_show_them
     some = [{**r, "subteams_max": 2 if r["episode"] < 8 else 3} for r in three]
     [row] = judge_all(gather([type(tmp_path)(_eval_run(tmp_path, "some", some))]), [claim])
     assert row.verdict == FAILS and row.measured.ours.value == pytest.approx(90.0)
+
+
+def test_staf_slower_than_lf_compares_arrival_times_and_needs_every_formation(tmp_path) -> None:
+    from stafpipe.report.claims_staf_paper import paper_staf_claims
+
+    [claim] = [c for c in paper_staf_claims() if c.statement.startswith("STAF is somewhat slower")]
+    runs = []
+    for f in ("circle", "wedge", "line"):
+        for method, tt in (("staf", 60.0), ("lf", 30.0)):
+            rows = [{**r, "tt_arrived": tt + r["episode"] % 2} for r in _episodes(method, f, 1.0)]
+            runs.append(type(tmp_path)(_eval_run(tmp_path, f"{method}-{f}", rows)))
+    [row] = judge_all(gather(runs), [claim])
+    assert row.verdict == HOLDS and row.measured.ours.value == 3
+    [row] = judge_all(gather(runs[:-1]), [claim])  # L&F's line missing: not measured, not "does not hold"
+    assert row.verdict == MISSING

@@ -4,7 +4,8 @@ An adapter says what the network sees (features), where each robot is heading (t
 measured to, and the goal slot its arrival is judged at), and the method's own reward terms. The PPO rollout
 (`rollout.collect`) and the evaluation controller (`controllers/learned.py`) both drive a method only through its
 adapter, on batches of worlds (B, n, ...), so training and evaluation cannot drift apart and the trainer has no
-method-name branches: a new learned method is a network file, an adapter here and a config.
+method-name branches: a new learned method is a network file, an adapter, a config and its entry in
+`learning/registry.py:ADAPTERS`.
 """
 
 from __future__ import annotations

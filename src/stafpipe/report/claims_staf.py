@@ -186,7 +186,7 @@ def _lf_fastest(ev: Evidence) -> Measured:
     hits, total = 0, 0
     for f in FORMATIONS:
         lf = ev.number("tt_arrived", **cell("lf", f))
-        rivals = [ev.number("tt", **cell(m, f)) for m in (PLANNED, "dgnn")]
+        rivals = [ev.number("tt_arrived", **cell(m, f)) for m in (PLANNED, "dgnn")]
         if math.isnan(lf.value) or all(math.isnan(r.value) for r in rivals):
             continue
         total += 1
@@ -194,8 +194,8 @@ def _lf_fastest(ev: Evidence) -> Measured:
     return Measured(
         Number(hits if total else math.nan, 0, total),
         Criterion("at_least", 3),
-        "formations where L&F's TT of arrivals is below both others' TT outside both CIs "
-        "(L&F's whole team never arrives)",
+        "formations where L&F's TT of arrivals is below both others' outside both CIs (the same measure on every "
+        "side: L&F's whole team never arrives)",
     )
 
 
