@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
-from mcap.exceptions import DecoderNotFoundError, McapError
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import Writer as RawWriter
 from mcap_ros2.decoder import DecoderFactory
@@ -130,7 +130,8 @@ class EpisodeRecord:
     """The damage a recovered (partial) log was copied from; None for a log as written."""
 
 
-def _not_a_log(path: Path) -> None:
+def require_log_file(path: Path) -> None:
+    """A clear LogError unless `path` is a file."""
     if not path.is_file():
         raise LogError(f"{path}: " + ("a directory, not an episode log" if path.is_dir() else "no such file"))
 
@@ -139,11 +140,11 @@ def _stream(path: Path, on_message: Callable[[str, Any], None]) -> str | None:
     """Decode every message of an episode log in log-time order, handing each to `on_message(topic, message)`, one
     chunk in memory at a time; the damage a recovered log was copied from, or None. A clear LogError where the file
     is missing, damaged or not a stafpipe episode log."""
-    _not_a_log(path)
+    require_log_file(path)
     recovered = None
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
+            reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             topics = sorted({c.topic for c in summary.channels.values()}) if summary is not None else None
             if topics is not None and "/episode" not in topics:
@@ -165,11 +166,12 @@ def _stream(path: Path, on_message: Callable[[str, Any], None]) -> str | None:
                     if channel.id not in decoders:
                         decoder = factory.decoder_for(channel.message_encoding, schema)
                         if decoder is None:
-                            raise DecoderNotFoundError(f"no decoder for {channel.topic} ({channel.message_encoding})")
+                            raise LogError(
+                                f"{path}: not a stafpipe episode log (no decoder for {channel.topic}, "
+                                f"{channel.message_encoding})"
+                            )
                         decoders[channel.id] = decoder
                     on_message(channel.topic, decoders[channel.id](msg.data))
-    except DecoderNotFoundError as exc:
-        raise LogError(f"{path}: not a stafpipe episode log ({exc})") from None
     except (McapError, ValueError, KeyError, EOFError, OSError) as exc:
         raise LogError(
             f"{path}: not a readable MCAP episode log ({type(exc).__name__}: {exc}); try `stafpipe inspect --recover`"
@@ -237,7 +239,6 @@ class EpisodeOutline:
     changes: list[tuple[float, np.ndarray]] = field(default_factory=list)
     """(time, subteam labels) where the subteams change (the first `MAX_CHANGES` of them)."""
     events: dict[str, int] = field(default_factory=dict)
-    metrics: dict[str, float] | None = None
     recovered: str | None = None
 
 
@@ -262,8 +263,6 @@ def outline_episode(path: str | Path) -> EpisodeOutline:
             last = labels
         elif topic == "/events":
             out.events[msg.kind] = out.events.get(msg.kind, 0) + 1
-        elif topic == "/metrics":
-            out.metrics = json.loads(msg.json)
 
     out.recovered = _stream(path, take)
     if not out.method or not out.steps:
@@ -277,7 +276,7 @@ def recover(src: str | Path, dst: str | Path) -> tuple[int, int, list[Damage]]:
     damage, so that it reads as a partial episode. Returns (messages kept, channels, the damage found); an intact log
     is not copied (0, 0, []), and an MCAP file of another tool is refused."""
     src = Path(src)
-    _not_a_log(src)
+    require_log_file(src)
     data = src.read_bytes()
     scan = intact_records(data)
     damage = check(data, scan)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from stafpipe.episode import scenario_from_yaml, trajectory_from_record
-from stafpipe.episode_log import EpisodeRecord, LogError, outline_episode, read_episode
+from stafpipe.episode_log import EpisodeRecord, LogError, outline_episode, read_episode, require_log_file
 from stafpipe.mcap_check import FileView, check
 from stafpipe.metrics import MetricContext, episode_metrics
 
@@ -34,8 +34,7 @@ def describe(path: str) -> tuple[str, bool]:
     compared, as the report says). A damaged file (any CRC, magic or record length that does not hold:
     mcap_check.check) is an error naming the first damage. Memory stays bounded for a log of any size."""
     file = Path(path)
-    if not file.is_file():
-        raise LogError(f"{path}: " + ("a directory, not an episode log" if Path(path).is_dir() else "no such file"))
+    require_log_file(file)
     with open(file, "rb") as f:
         damage = check(FileView(f))
     if damage:

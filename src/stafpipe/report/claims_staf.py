@@ -44,7 +44,7 @@ def _cfi_note(ev: Evidence, method: str, formation: str, shown: str = "cfi_0.5")
     return "; ".join(notes)
 
 
-def _mean(column: str, where: dict[str, Any], criterion: Criterion, note: str = "") -> Callable[[Evidence], Measured]:
+def mean_of(column: str, where: dict[str, Any], criterion: Criterion, note: str = "") -> Callable[[Evidence], Measured]:
     """A measurement: the mean of `column` (in per cent) over the matching episodes, judged by `criterion`."""
     return lambda ev: Measured(ev.number(column, 100, " %", **where), criterion, note)
 
@@ -66,7 +66,7 @@ def _table1_claims() -> list[Claim]:
                     f"{NAMES[method]} success rate, {f}",
                     f"{sr:.0f} %",
                     "staf_table1",
-                    _mean("sr", cell(method, f), Criterion("at_least", sr - 5)),
+                    mean_of("sr", cell(method, f), Criterion("at_least", sr - 5)),
                 )
             )
         lf_sr = PAPER_TABLE1[("lf", f)][0]
@@ -77,7 +77,7 @@ def _table1_claims() -> list[Claim]:
                 f"L&F success rate, {f}",
                 f"{lf_sr:.0f} %",
                 "staf_table1",
-                _mean("sr", cell("lf", f), Criterion("near", lf_sr, 15)),
+                mean_of("sr", cell("lf", f), Criterion("near", lf_sr, 15)),
             )
         )
         cfi = PAPER_TABLE1[paper_key(PLANNED, f)][2]
@@ -305,7 +305,7 @@ def _team_size_claims() -> list[Claim]:
             "CFI of 4 robots at sigma < 0.03",
             "87 %",
             "staf_team_size",
-            _mean("cfi_0.01", circle(4), Criterion("at_least", 87), "sigma 0.01"),
+            mean_of("cfi_0.01", circle(4), Criterion("at_least", 87), "sigma 0.01"),
         ),
         Claim(
             "STAF",
@@ -313,7 +313,7 @@ def _team_size_claims() -> list[Claim]:
             "CFI of 8 robots at sigma < 0.03",
             "at least 80 %",
             "staf_team_size",
-            _mean("cfi_0.01", circle(8), Criterion("at_least", 80), "sigma 0.01"),
+            mean_of("cfi_0.01", circle(8), Criterion("at_least", 80), "sigma 0.01"),
         ),
         Claim(
             "STAF", "Fig. 8(a-d)", "teams of 4, 6, 7 and 8 robots pass the corridor", "all", "staf_team_size", all_sizes
