@@ -118,11 +118,12 @@ def plot(
     ctx: typer.Context,
     kind: str = typer.Argument(
         None,
-        help="What to draw: trajectories (eval run), partitions (ablate run), training (train-ppo/-high run), "
+        help="What to draw: video (eval run or .mcap file: MP4 + GIF per episode), trajectories (eval run), "
+        "partitions (ablate run), training (train-ppo/-high run), "
         "connectivity (Cezayirli eval run), regions (Zhu eval run), timing (Zhu runs: Table I), table (STAF Tables 1-2 "
         "from plot.run_dirs=[...]).",
     ),
-    run_dir: str = typer.Argument(None, help="The run directory to draw from (e.g. an eval run)."),
+    run_dir: str = typer.Argument(None, help="The run directory to draw from (e.g. an eval run; video: or a .mcap)."),
 ) -> None:
     """Draw figures from a run directory, e.g. `stafpipe plot trajectories outputs/eval/DATE/TIME`."""
     # The two positionals are sugar for plot.kind= and plot.run_dir=; anything that looks like an override is one.

@@ -6,6 +6,7 @@ checked by `check()` methods, which name the full key of a bad value.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -135,8 +136,10 @@ PLOT_KINDS = (
     "table",
     "report",
     "adaptation",
+    "video",
 )
 FORMATS = ("png", "pdf", "svg")
+VIDEO_FORMATS = ("mp4", "gif")
 
 
 @dataclass
@@ -151,9 +154,10 @@ class PlotConfig:
     (an eval run of method=zhu: the computation-time table, Zhu Table I, as timing.md and timing.tex) or `table` (eval
     runs, `run_dir` and/or `run_dirs`: STAF Table 1 and Table 2, ours beside the paper's, as table.md/.csv) or `report`
     (any finished eval, ablate and plot runs, `run_dirs`: every claim of the three papers with its computed verdict, as
-    REPRODUCTION.md and reproduction.csv; `stafpipe run reproduce`)."""
+    REPRODUCTION.md and reproduction.csv; `stafpipe run reproduce`) or `video` (an eval run's episode logs, or one
+    episode's .mcap file: an MP4 and a GIF per episode)."""
     run_dir: str = ""
-    """The run directory to draw from."""
+    """The run directory to draw from (`video`: or an episode's .mcap file)."""
     run_dirs: list[str] = field(default_factory=list)
     """`table`: more eval run directories whose episodes join the table; `report`: the runs it reads."""
     max_episodes: int = 4
@@ -162,6 +166,14 @@ class PlotConfig:
     """`regions`: the snapshot times (s); empty: the first split, the merge after it, and the end."""
     formats: list[str] = field(default_factory=lambda: ["png", "pdf"])
     dpi: int = 150
+    video_formats: list[str] = field(default_factory=lambda: ["mp4", "gif"])
+    """`video`: the files written per episode (mp4: H.264, gif: looping)."""
+    fps: float = 10.0
+    """`video`: frames per second; with `stride` 1 and the simulator's 0.1 s step, 10 plays the episode in real time."""
+    stride: int = 1
+    """`video`: one frame every `stride` logged steps (the last step always has one)."""
+    width_px: int = 960
+    """`video`: frame width in pixels (rounded down to a multiple of 16, as H.264 codes 16-pixel blocks)."""
 
     def check(self, key: str = "plot") -> None:
         require(self.kind in PLOT_KINDS, f"{key}.kind", f"must be one of {list(PLOT_KINDS)}", self.kind)
@@ -175,6 +187,12 @@ class PlotConfig:
         for fmt in self.formats:
             require(fmt in FORMATS, f"{key}.formats", f"entries must be in {list(FORMATS)}", fmt)
         require(self.dpi > 0, f"{key}.dpi", "must be > 0", self.dpi)
+        require(bool(self.video_formats), f"{key}.video_formats", "must name at least one format", self.video_formats)
+        for fmt in self.video_formats:
+            require(fmt in VIDEO_FORMATS, f"{key}.video_formats", f"entries must be in {list(VIDEO_FORMATS)}", fmt)
+        require(math.isfinite(self.fps) and 0 < self.fps <= 120, f"{key}.fps", "must be in (0, 120]", self.fps)
+        require(self.stride >= 1, f"{key}.stride", "must be >= 1", self.stride)
+        require(64 <= self.width_px <= 3840, f"{key}.width_px", "must be in [64, 3840]", self.width_px)
 
 
 @dataclass

@@ -4,6 +4,7 @@ own directory (which, like every run directory, carries its resolved config)."""
 from __future__ import annotations
 
 import logging
+import os
 import re
 import shutil
 from collections.abc import Callable
@@ -233,17 +234,57 @@ def _report(pc: PlotConfig, out_dir: Path) -> list[Path]:
     return outputs
 
 
+def _videos(pc: PlotConfig, source: Path, out_dir: Path) -> list[Path]:
+    """`plot video`: an MP4 and/or GIF (`plot.video_formats`) per episode of an eval run (the first `max_episodes`),
+    or of one episode's .mcap file. Every log is read before the first video is written, and each video is streamed
+    into a temporary file renamed into place once whole."""
+    from stafpipe.episode_log import read_episode
+    from stafpipe.plots.trajectories import episode_files
+    from stafpipe.plots.video import episode_frames, write_video
+
+    if source.is_file():
+        files = [source]
+    else:
+        files = episode_files(source)
+        if not files:
+            raise StafpipeError(
+                f"plot.run_dir: {source} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
+            )
+        files = files[: pc.max_episodes] if pc.max_episodes else files
+    records = [read_episode(f) for f in files]
+    outputs: list[Path] = []
+    for path, rec in zip(files, records, strict=True):
+        final = {fmt: out_dir / f"video_{path.stem}.{fmt}" for fmt in pc.video_formats}
+        # the encoders pick the container by the file's suffix, so the temporary file keeps it
+        tmp = {fmt: p.with_name(f".{p.name}.tmp-{os.getpid()}.{fmt}") for fmt, p in final.items()}
+        try:
+            write_video(episode_frames(rec, pc.stride, pc.width_px), tmp, pc.fps)
+            for fmt, p in final.items():
+                os.replace(tmp[fmt], p)
+                outputs.append(p)
+        finally:
+            for t in tmp.values():
+                t.unlink(missing_ok=True)
+        log.info("wrote the videos of %s", path.name)
+    print("\n".join(str(p) for p in outputs))
+    return outputs
+
+
 def run_plot(cfg: DictConfig, out_dir: Path) -> list[Path]:
     """Draw `plot.kind` from `plot.run_dir`; every input is read and checked before the first figure is written."""
     pc = section(cfg.plot, PlotConfig)
     pc.check()
     run_dir = Path(pc.run_dir or pc.run_dirs[0])
+    if pc.kind == "video" and run_dir.is_file():
+        return _videos(pc, run_dir, out_dir)
     for d in [run_dir, *map(Path, pc.run_dirs)]:
         if not d.is_dir():
             raise StafpipeError(f"plot.run_dir: no such directory: {d}")
     outputs: list[Path] = []
     if pc.kind == "report":
         return _report(pc, out_dir)
+    if pc.kind == "video":
+        return _videos(pc, run_dir, out_dir)
     if pc.kind in ("timing", "table"):
         tables = _timing_tables(run_dir) if pc.kind == "timing" else _staf_tables(pc)  # all read before any write
         for name, text in tables.items():
