@@ -12,7 +12,14 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 SRC = Path(__file__).resolve().parents[1] / "src"
-ENTRY = ("stafpipe.stages", "stafpipe.cli", "stafpipe.launch", "stafpipe.pipeline", "stafpipe.__main__")
+ENTRY = (
+    "stafpipe.stages",
+    "stafpipe.cli",
+    "stafpipe.launch",
+    "stafpipe.pipeline",
+    "stafpipe.compare",
+    "stafpipe.__main__",
+)
 """The command line and the stages: the only modules that may import a stage."""
 KNOWN_METHOD_IMPORTS = {("stafpipe.learning.config", "stafpipe.methods.staf.subteaming")}
 """The training config holds `method=staf`'s rule settings as a field of its own (`train_ppo.subteaming`); it goes

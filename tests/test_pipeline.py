@@ -60,7 +60,7 @@ def test_step_reruns_when_a_file_it_reads_changes(workdir, capsys) -> None:
     path = _write(
         workdir,
         "steps:\n  - {name: e, stage: eval, overrides: [experiment=smoke, method=straight, "
-        f"'scenario.path={scenario}', scenario.time_limit=3, eval.episodes=1]}}\n",
+        f"'scenario.path={scenario}', eval.episodes=1]}}\n",
     )
     assert run_pipeline(path) == 0
     assert run_pipeline(path) == 0

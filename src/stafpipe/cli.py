@@ -177,6 +177,35 @@ def run(
     raise typer.Exit(code)
 
 
+@app.command(context_settings=_HYDRA_ARGS)
+def compare(
+    ctx: typer.Context,
+    methods: str = typer.Option(
+        "staf,staf_planned,dgnn,lf,zhu,cezayirli", "--methods", help="Comma-separated methods to run."
+    ),
+    name: str = typer.Option(
+        "", "--name", help="The compare's directory under outputs/pipelines/ (default: compare-SCENARIO)."
+    ),
+    videos: int = typer.Option(1, "--videos", help="Episodes drawn as video per method (0: none)."),
+    force: bool = typer.Option(False, "--force", help="Run every step, even those already done for the same config."),
+) -> None:
+    """Every method on one scenario in one directory: a table with STAF's Table-1 columns, a trajectory figure and a
+    video per method, compare.md listing them; e.g. `stafpipe compare scenario.path=my_map.yaml eval.episodes=10`.
+    Trailing arguments are eval overrides for every method."""
+    from pathlib import Path
+
+    from stafpipe.compare import parse_methods, run_compare
+
+    try:
+        code = run_compare(list(ctx.args), parse_methods(methods), name, videos, force, Path("outputs"))
+    except StafpipeError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    except OSError as exc:
+        _fs_fault_exit(exc)
+    raise typer.Exit(code)
+
+
 @app.command()
 def inspect(
     file: str = typer.Argument(..., help="An episode's MCAP file."),

@@ -215,7 +215,7 @@ def stage_task(cfg: DictConfig) -> None:
     resumable = str(cfg.get("stage")) in RESUMABLE
     try:
         lock.acquire()  # refused: the directory is another run's, so nothing in it is touched
-        check_run_config(cfg)
+        check_run_config(cfg, HydraConfig.get().overrides.task)
         _remove_partials(out_dir)  # a killed run's unfinished files are never valid, resumable stage or not
         if not resumable and _clear_outputs(out_dir):
             log.warning("%s held files of an earlier run of this stage; removed, the run starts over", out_dir)
@@ -287,7 +287,7 @@ def _config_problem(stage: str, overrides: Sequence[str]) -> str | None:
 
     try:
         for job in jobs_to_check(overrides) or []:
-            check_run_config(compose_config(stage, job))
+            check_run_config(compose_config(stage, job), job)
     except (HydraException, OmegaConfBaseException) as exc:
         return explain(exc, stage, list(overrides))
     except StafpipeError as exc:

@@ -155,18 +155,28 @@ def run_pipeline(
     pipe = load_pipeline(find_pipeline(name_or_path))
     extra = [search_path_override(config_dirs)] if config_dirs else []
     plan = plan_pipeline(pipe, out_root, extra)
-    for i, (step, overrides, run_dir, digest, cfg) in enumerate(plan, start=1):
-        head = f"[{i}/{len(plan)}] {step.name} ({step.stage})"
-        if not force and _is_done(run_dir, digest, inputs_hash(cfg)):  # inputs: once the steps before are done
-            print(f"{head}: skipped, already done for this config in {run_dir}")
-            continue
-        started = time.perf_counter()
-        code = launch(step.stage, [*overrides, f"hydra.run.dir='{run_dir}'"])
-        if code != 0 or not _is_done(run_dir, digest):
+    for i, planned in enumerate(plan, start=1):
+        head = f"[{i}/{len(plan)}] {planned[0].name} ({planned[0].stage})"
+        code = run_step(head, planned, force)
+        if code != 0:
             print(f"{head}: failed (exit code {code}); pipeline {pipe.name} stopped")
-            return code or 1
-        print(f"{head}: done in {time.perf_counter() - started:.1f} s -> {run_dir}")
+            return code
     print(f"pipeline {pipe.name}: all {len(plan)} steps done")
+    return 0
+
+
+def run_step(head: str, planned: tuple[PipelineStep, list[str], Path, str, DictConfig], force: bool) -> int:
+    """Run one planned step (`plan_pipeline`) into its run directory, or skip it if it is already done for the same
+    config and inputs; its exit code (0 for a skip, non-zero where the step did not finish)."""
+    step, overrides, run_dir, digest, cfg = planned
+    if not force and _is_done(run_dir, digest, inputs_hash(cfg)):  # inputs: once the steps before are done
+        print(f"{head}: skipped, already done for this config in {run_dir}")
+        return 0
+    started = time.perf_counter()
+    code = launch(step.stage, [*overrides, f"hydra.run.dir='{run_dir}'"])
+    if code != 0 or not _is_done(run_dir, digest):
+        return code or 1
+    print(f"{head}: done in {time.perf_counter() - started:.1f} s -> {run_dir}")
     return 0
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from omegaconf import DictConfig, ListConfig, OmegaConf
@@ -21,8 +22,11 @@ MAX_SEED = (2**63 - 1) // SEED_STRIDE - SEED_STRIDE
 """The largest run seed whose episode seeds fit the 64-bit integers of the episode logs (about 9.2e13)."""
 
 
-def check_run_config(cfg: DictConfig) -> None:
+def check_run_config(cfg: DictConfig, overrides: Sequence[str] = ()) -> None:
+    """Every run's config before any work; `overrides`: the command line's, for the rules that depend on what was
+    given rather than on the composed values."""
     _unknown_keys(cfg, "")
+    _scenario_fields_beside_path(cfg, overrides)
     _non_finite(OmegaConf.to_container(cfg, resolve=True), "")
     require(
         0 <= int(cfg.seed) <= MAX_SEED, "seed", f"must be in [0, {MAX_SEED}] (episode seeds must fit 64 bits)", cfg.seed
@@ -46,6 +50,20 @@ STAGE_SECTIONS: dict[str, tuple[str, ...]] = {
 }
 """The sections each stage reads, besides world, sensing and eval: checked with the rest before any work (and for
 every job of a sweep before its first job runs)."""
+
+
+def _scenario_fields_beside_path(cfg: DictConfig, overrides: Sequence[str]) -> None:
+    """`scenario.path` replaces the scenario group's fields with the file's, so a `scenario.<field>=` override beside
+    it would be dropped without a word (a time limit, say, with the file's own in force): refused, naming the key."""
+    if "scenario" not in cfg or cfg.scenario is None or not cfg.scenario.get("path"):
+        return
+    for override in overrides:
+        key = override.split("=", 1)[0].lstrip("+~").strip()
+        if key.startswith("scenario.") and key != "scenario.path":
+            raise ConfigError(
+                f"{key}: not applied beside scenario.path (the scenario file replaces the scenario's fields); "
+                f"set it in {cfg.scenario.path}, or leave scenario.path out"
+            )
 
 
 def _method_with_the_run(cfg: DictConfig) -> None:

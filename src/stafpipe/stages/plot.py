@@ -110,15 +110,31 @@ def _is_papers_corridor(run_dir: Path) -> bool:
     return all(_floats(run.get(k)) == _floats(shipped.get(k)) for k in ("world", "obstacles"))
 
 
+def eval_runs(run_dir: Path) -> list[Path]:
+    """The eval runs a directory stands for: itself if it holds results.parquet, else the job directories of a
+    multirun (`stafpipe eval -m ...`: numbered subdirectories, in job order). A clear error where it is neither."""
+    if (run_dir / "results.parquet").is_file():
+        return [run_dir]
+    jobs = sorted((d for d in run_dir.glob("*") if d.name.isdigit() and d.is_dir()), key=lambda d: int(d.name))
+    if jobs and (run_dir / "multirun.yaml").is_file():
+        missing = [j.name for j in jobs if not (j / "results.parquet").is_file()]
+        if missing:
+            raise StafpipeError(
+                f"plot.run_dirs: {run_dir} is a multirun whose jobs {missing} hold no results.parquet "
+                "(did they fail, or is it not an eval sweep?)"
+            )
+        return jobs
+    raise StafpipeError(f"plot.run_dirs: {run_dir} holds no results.parquet (is it an eval run or an eval multirun?)")
+
+
 def _staf_tables(pc: PlotConfig) -> dict[str, str]:
     """STAF Table 1 (and Table 2 where teams split) from the results of eval runs, ours beside the paper's."""
     from stafpipe.plots.staf_tables import markdown, subteam_tables, summary_table
 
     frames = []
-    for run, d in enumerate([pc.run_dir, *pc.run_dirs] if pc.run_dir else list(pc.run_dirs)):
-        path = Path(d) / "results.parquet"
-        if not path.is_file():
-            raise StafpipeError(f"plot.run_dirs: {d} holds no results.parquet (is it an eval run?)")
+    given = [pc.run_dir, *pc.run_dirs] if pc.run_dir else list(pc.run_dirs)
+    for run, d in enumerate(d for g in given for d in eval_runs(Path(g))):
+        path = d / "results.parquet"
         try:
             frames.append(pd.read_parquet(path).assign(run=run, paper_cell=_is_papers_corridor(Path(d))))
         except Exception as exc:  # noqa: BLE001 (pyarrow raises several kinds for a damaged file)
