@@ -19,6 +19,7 @@ METHODS: dict[str, tuple[str, str]] = {
     "dgnn": ("stafpipe.controllers.dgnn:DGNNConfig", "stafpipe.controllers.dgnn:DGNNController"),
     "staf_planned": ("stafpipe.controllers.staf:StafMethodConfig", "stafpipe.controllers.staf:StafController"),
     "staf": ("stafpipe.methods.staf.method:StafConfig", "stafpipe.methods.staf.method:StafController"),
+    "onnx": ("stafpipe.controllers.onnx_policy:OnnxConfig", "stafpipe.controllers.onnx_policy:OnnxController"),
 }
 
 __all__ = ["METHODS", "Controller", "Event", "TeamInfo", "make_controller", "method_config_class"]
