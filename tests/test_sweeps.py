@@ -52,3 +52,26 @@ def test_ray_sweep_of_two_eval_jobs_gathers_into_one_table(workdir) -> None:
     assert launch("plot", ["plot.kind=table", f"plot.run_dirs=[{','.join(map(str, dirs))}]"]) == 0
     [table_dir] = [d for d in job_dirs(workdir / "outputs") if (d / "table.csv").is_file()]
     assert "straight" in (table_dir / "table.md").read_text()
+
+
+@pytest.mark.slow  # two sweeps of four maps, one in two processes; each map's path grid about 2 s: 30-40 s
+def test_a_directory_of_maps_is_one_sweep_with_the_same_results_in_parallel(workdir) -> None:
+    import pandas as pd
+
+    maps = workdir / "maps"
+    maps.mkdir()
+    for k in range(4):
+        (maps / f"m{k}.yaml").write_text(
+            f"name: m{k}\nworld: {{xmin: 0, ymin: -2.5, xmax: 6, ymax: 2.5}}\ntime_limit: 3\n"
+            f"team: {{n: {3 + k}, formation: line, spacing: 0.5, start: [1.5, 0], goal: [4.5, 0]}}\n"
+        )
+    common = ["eval", "-m", "method=straight", f"scenario.path={maps}", "eval.episodes=1"]
+    assert launch(*common[:1], [*common[1:], f"hydra.sweep.dir={workdir / 'serial'}"]) == 0
+    local = ["hydra/launcher=local", "hydra.launcher.n_jobs=2", f"hydra.sweep.dir={workdir / 'par'}"]
+    assert launch(*common[:1], [*common[1:], *local]) == 0
+    for j in range(4):
+        serial, parallel = (pd.read_parquet(workdir / d / str(j) / "results.parquet") for d in ("serial", "par"))
+        assert serial.equals(parallel) and serial["scenario"].iloc[0] == f"m{j}" and serial["n"].iloc[0] == 3 + j
+    assert launch("plot", ["plot.kind=table", f"plot.run_dir={workdir / 'par'}"]) == 0  # one table of the four
+    [table] = [d for d in job_dirs(workdir / "outputs" / "plot") if (d / "table.csv").is_file()]
+    assert sorted(pd.read_csv(table / "table.csv")["scenario"]) == ["m0", "m1", "m2", "m3"]

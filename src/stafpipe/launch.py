@@ -297,6 +297,23 @@ def _config_problem(stage: str, overrides: Sequence[str]) -> str | None:
     return None
 
 
+def _maps_of(override: str) -> str:
+    """In a sweep, `scenario.path=DIR` (a directory) stands for every scenario file in it: one job per `*.yaml`, in
+    name order, for Hydra's launcher to spread (`hydra/launcher=local`: one process per core). Other overrides, and
+    a path that is not a directory, are left as they are."""
+    key, sep, value = override.partition("=")
+    if not sep or key.lstrip("+") != "scenario.path":
+        return override
+    folder = Path(value.strip().strip("'\""))
+    if not value.strip() or not folder.is_dir():
+        return override
+    files = sorted(folder.glob("*.yaml"))
+    if not files:
+        return override  # the scenario loader says it is a directory without a scenario in it
+    quoted = ",".join("'" + str(f).replace("\\", "\\\\").replace("'", "\\'") + "'" for f in files)
+    return f"{key}={quoted}"
+
+
 def launch(stage: str, overrides: Sequence[str]) -> int:
     """Run `stage` with Hydra command-line `overrides` (and flags such as -m, --cfg); return the exit code."""
     from hydra.errors import HydraException
@@ -307,6 +324,7 @@ def launch(stage: str, overrides: Sequence[str]) -> int:
     register_configs()
     logging.raiseExceptions = False  # a log file on a full disk must not print tracebacks over the one-line error
     if any(o in ("-m", "--multirun") for o in overrides):
+        overrides = [_maps_of(o) for o in overrides]
         problem = _config_problem(stage, overrides)  # every value of the sweep, before its first job runs
         if problem:
             print(f"error: {problem}", file=sys.stderr)

@@ -448,7 +448,8 @@ def load_scenario_file(path: str | Path) -> ScenarioConfig:
     path = Path(path)
     if path.is_dir():  # a generate-maps output folder, say: a scenario is one file
         raise ScenarioError(
-            f"scenario file {path} is a directory; name one scenario YAML in it (e.g. {path / 'map_0000.yaml'})"
+            f"scenario file {path} is a directory; name one scenario YAML in it (e.g. {path / 'map_0000.yaml'}), "
+            f"or evaluate every map in it as a sweep: stafpipe eval -m scenario.path={path}"
         )
     if not path.is_file():
         raise ScenarioError(f"scenario file {path} does not exist")
