@@ -75,3 +75,38 @@ def test_a_directory_of_maps_is_one_sweep_with_the_same_results_in_parallel(work
     assert launch("plot", ["plot.kind=table", f"plot.run_dir={workdir / 'par'}"]) == 0  # one table of the four
     [table] = [d for d in job_dirs(workdir / "outputs" / "plot") if (d / "table.csv").is_file()]
     assert sorted(pd.read_csv(table / "table.csv")["scenario"]) == ["m0", "m1", "m2", "m3"]
+
+
+@pytest.mark.slow  # two tiny trainings: about 20 s
+def test_optuna_search_reads_each_jobs_objective(workdir) -> None:
+    pytest.importorskip("hydra_plugins.hydra_optuna_sweeper", reason="needs the optuna extra: pip install '.[optuna]'")
+    import json
+
+    args = ["-m", "hydra/sweeper=ppo_search", "hydra.sweeper.n_trials=2", "experiment=smoke", "train_ppo.iterations=1"]
+    assert launch("train-ppo", args) == 0
+    [sweep] = (workdir / "outputs" / "multirun" / "train-ppo").glob("*/*")
+    jobs = job_dirs(sweep)
+    assert len(jobs) == 2
+    values = [json.loads((d / "objective.json").read_text())["value"] for d in jobs]
+    lrs = {float(OmegaConf.load(d / "config.yaml").train_ppo.lr) for d in jobs}
+    assert len(lrs) == 2 and all(1e-5 <= lr <= 1e-3 for lr in lrs)  # two proposals from the search space
+    result = OmegaConf.load(sweep / "optimization_results.yaml")
+    assert result.best_value == max(values)
+
+
+def test_the_objective_is_the_validation_score_of_the_kept_weights() -> None:
+    from stafpipe.stages.train_ppo import kept_score
+
+    warm = {"imitation/val_success_rate": 0.5, "imitation/val_collisions_per_episode": 1.0}
+    history = [
+        {"iteration": 1, "charts/success_rate": 0.1, **warm},
+        {"iteration": 2, "charts/success_rate": 0.2, "val/success_rate": 0.7, "val/collisions_per_episode": 0.0},
+        {"iteration": 3, "charts/success_rate": 0.9, "val/success_rate": 0.6, "val/collisions_per_episode": 0.0},
+    ]
+    assert kept_score(history) == {
+        "name": "val/success_rate of iteration 2 (kept)",
+        "value": 0.7,
+        "direction": "maximize",
+    }
+    assert kept_score(history[:1])["value"] == 0.5  # only the warm start was judged: it is kept
+    assert kept_score([{"iteration": 1, "charts/success_rate": 0.3}])["value"] == 0.3  # no validation

@@ -16,6 +16,12 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
+OBJECTIVE = "objective.json"
+"""A run's one number to optimise, where its stage has one (train-ppo: the validation success rate of the weights it
+kept): `{"name", "value", "direction"}`. Hydra's task function returns its value (`launch.objective`), which is what
+a sweeper that searches (Optuna's) reads of each job."""
+
+
 def atomic_write(path: Path, write: Callable[[Path], object]) -> Path:
     """Call `write(tmp)` on a temporary sibling of `path`, then rename it into place."""
     path = Path(path)

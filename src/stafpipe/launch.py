@@ -11,6 +11,7 @@ import contextlib
 import errno
 import hashlib
 import importlib
+import json
 import logging
 import os
 import re
@@ -32,7 +33,7 @@ from stafpipe.config.checks import check_run_config
 from stafpipe.config.compose import compose_config, config_name
 from stafpipe.errors import StafpipeError
 from stafpipe.interrupt import stop_at_boundaries
-from stafpipe.io import atomic_write, write_json
+from stafpipe.io import OBJECTIVE, atomic_write, write_json
 from stafpipe.paths import conf_dir
 from stafpipe.run_lock import RunDirLock
 
@@ -207,8 +208,8 @@ def _abandon(out_dir: Path, lock: RunDirLock, clear: bool = False) -> None:
     _discard_if_empty(out_dir)
 
 
-def stage_task(cfg: DictConfig) -> None:
-    """Hydra's task function for every stage."""
+def stage_task(cfg: DictConfig) -> float | None:
+    """Hydra's task function for every stage; returns the run's objective (`objective`) where its stage has one."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     started = time.perf_counter()
     lock = RunDirLock(out_dir)
@@ -257,6 +258,15 @@ def stage_task(cfg: DictConfig) -> None:
     finally:
         with contextlib.suppress(OSError):
             lock.release()
+    return objective(out_dir)
+
+
+def objective(out_dir: Path) -> float | None:
+    """The value of a finished run's `objective.json`, or None where its stage writes none."""
+    path = out_dir / OBJECTIVE
+    if not path.is_file():
+        return None
+    return float(json.loads(path.read_text())["value"])
 
 
 def _finish(cfg: DictConfig, out_dir: Path, outputs: list[Path], inputs: str, started: float) -> None:

@@ -17,7 +17,7 @@ import pandas as pd
 from omegaconf import DictConfig, OmegaConf
 
 from stafpipe.errors import StafpipeError
-from stafpipe.io import save_figure, write_table
+from stafpipe.io import OBJECTIVE, save_figure, write_json, write_table
 from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario
@@ -70,6 +70,27 @@ def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) 
     worlds = [pool[k % len(pool)] for k in range(tc.validation_episodes)] if pool else []
     groups = by_team([(s, *path_and_width(s)) for s in worlds])
     return [groups[k] for k in sorted(groups)]
+
+
+def kept_score(history: list[dict[str, float]]) -> dict[str, object]:
+    """What a search maximises (`objective.json`): the validation success rate of the iteration whose weights
+    `policy.pt` holds (`best_iteration`; the warm start's as iteration 0), or, without validation scenarios, the
+    last iteration's training success rate. Each names itself."""
+    from stafpipe.learning.ppo import best_iteration
+
+    chosen = best_iteration(history)
+    if chosen is None:
+        last = history[-1] if history else {}
+        return {
+            "name": "charts/success_rate of the last iteration",
+            "value": float(last.get("charts/success_rate", 0.0)),
+            "direction": "maximize",
+        }
+    if chosen == 0:
+        value = history[0]["imitation/val_success_rate"]
+    else:
+        value = next(r["val/success_rate"] for r in history if r["iteration"] == chosen and "val/success_rate" in r)
+    return {"name": f"val/success_rate of iteration {chosen} (kept)", "value": float(value), "direction": "maximize"}
 
 
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
@@ -151,6 +172,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         "selected_iteration": len(history) if (chosen := best_iteration(history)) is None else chosen,
     }
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
+    outputs.append(write_json(out_dir / OBJECTIVE, kept_score(history)))
     outputs += sorted((out_dir / TB_DIR).iterdir())
     outputs += write_table(pd.DataFrame(history), curves)
     outputs += save_figure(ppo_figure(history), curves, dpi=120)
