@@ -50,6 +50,7 @@ def test_compare_refuses_bad_input_before_any_work(workdir) -> None:
     for args, says in (
         (["compare", "--methods", "straight,nosuch"], "--methods: unknown method(s) ['nosuch']"),
         (["compare", "--methods", "straight", "--videos", "-1"], "--videos: must be >= 0"),
+        (["compare", "--methods", "straight", "--name", "../up"], "--name: '../up' may hold only"),
         (["compare", "--methods", "straight", f"scenario.path={workdir / 'nope.yaml'}"], "nope.yaml"),
     ):
         result = runner.invoke(app, args)

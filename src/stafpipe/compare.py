@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -111,13 +112,15 @@ def run_compare(
     """Run every method of `methods` on the scenario the eval `overrides` give, then the table, figures and videos of
     those that ran; write `compare.md` into the compare's directory. Exit code 0 when at least one method ran, 2 when
     every method refused the input, else 1."""
+    if name and not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+        raise StafpipeError(f"--name: '{name}' may hold only letters, digits, '_' and '-' (a directory name)")
     if videos < 0:
         raise StafpipeError(f"--videos: must be >= 0 (episodes drawn as video per method), got {videos}")
     evals = [PipelineStep(f"eval-{m}", "eval", [f"method={m}", *overrides, "eval.log_episodes=true"]) for m in methods]
     probe = plan_pipeline(Pipeline("compare", "", evals[:1]), out_root, [])  # the scenario's name, bad input refused
     node = probe[0][4].scenario
     scenario = Path(str(node.path)).stem if node.get("path") else str(node.get("name") or "scenario")
-    name = name or f"compare-{scenario}"
+    name = name or "compare-" + re.sub(r"[^A-Za-z0-9_-]", "_", scenario)  # a directory name Hydra's overrides can carry
     plan = plan_pipeline(Pipeline(name, "", evals), out_root, [])  # every method's config before any work
     home = plan[0][2].parent
     outcomes = []
