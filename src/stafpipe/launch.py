@@ -334,11 +334,12 @@ def launch(stage: str, overrides: Sequence[str]) -> int:
     register_configs()
     logging.raiseExceptions = False  # a log file on a full disk must not print tracebacks over the one-line error
     if any(o in ("-m", "--multirun") for o in overrides):
-        overrides = [_maps_of(o) for o in overrides]
         problem = _config_problem(stage, overrides)  # every value of the sweep, before its first job runs
         if problem:
             print(f"error: {problem}", file=sys.stderr)
             return 2
+        # after the check: the maps of a directory differ only in the path, which composing each would not check
+        overrides = [_maps_of(o) for o in overrides]
     saved_argv, saved_full_error = sys.argv, os.environ.get("HYDRA_FULL_ERROR")
     sys.argv = [f"stafpipe {stage}", *overrides]
     os.environ["HYDRA_FULL_ERROR"] = "1"  # Hydra raises its errors to us instead of printing them and exiting 1
