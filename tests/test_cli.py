@@ -19,7 +19,8 @@ def test_every_stage_explains_its_overrides_groups_and_examples() -> None:
     for stage in STAGE_FUNCTIONS:
         out = runner.invoke(app, [stage, "--help"]).output
         assert "Trailing words are Hydra overrides" in out and "did-you-mean" in out, stage
-        assert "method: cezayirli, dgnn, lf, onnx, staf, staf_planned, straight, zhu" in out and "base" not in out, stage
+        methods = "method: cezayirli, dgnn, lf, onnx, staf, staf_planned, straight, zhu"
+        assert methods in out and "base" not in out, stage
         assert "formation: circle, line" in out and "robot: diff_drive, holonomic" in out, stage
         assert "scenario: bollards, bridge" in out and "experiment: " in out, stage
         examples = out.split("Examples:")[1].strip().splitlines()
