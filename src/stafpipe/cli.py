@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import typer
 
 from stafpipe.errors import StafpipeError
@@ -150,6 +152,18 @@ def _fs_fault_exit(exc: OSError) -> None:
     raise typer.Exit(2) from None
 
 
+def _exit_with(work: Callable[[], int]) -> None:
+    """Exit with the code `work()` returns; a StafpipeError is one line and exit code 2, a file-system fault too."""
+    try:
+        code = work()
+    except StafpipeError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(2) from None
+    except OSError as exc:
+        _fs_fault_exit(exc)
+    raise typer.Exit(code)
+
+
 @app.command()
 def run(
     pipeline: str = typer.Argument(..., help="A name in pipelines/ (e.g. smoke) or a path to a pipeline YAML."),
@@ -163,18 +177,11 @@ def run(
     ),
 ) -> None:
     """Run a pipeline: its stages in order, skipping those already done for the same resolved config."""
+    from pathlib import Path
+
     from stafpipe.pipeline import run_pipeline
 
-    try:
-        from pathlib import Path
-
-        code = run_pipeline(pipeline, force=force, config_dirs=[Path(d) for d in config_dir])
-    except StafpipeError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
-    except OSError as exc:
-        _fs_fault_exit(exc)
-    raise typer.Exit(code)
+    _exit_with(lambda: run_pipeline(pipeline, force=force, config_dirs=[Path(d) for d in config_dir]))
 
 
 @app.command(context_settings=_HYDRA_ARGS)
@@ -196,14 +203,7 @@ def compare(
 
     from stafpipe.compare import parse_methods, run_compare
 
-    try:
-        code = run_compare(list(ctx.args), parse_methods(methods), name, videos, force, Path("outputs"))
-    except StafpipeError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
-    except OSError as exc:
-        _fs_fault_exit(exc)
-    raise typer.Exit(code)
+    _exit_with(lambda: run_compare(list(ctx.args), parse_methods(methods), name, videos, force, Path("outputs")))
 
 
 @app.command()

@@ -23,45 +23,41 @@ from stafpipe.sections import section
 log = logging.getLogger(__name__)
 
 
-def _trajectory_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
-    from stafpipe.episode_log import read_episode
-    from stafpipe.plots.trajectories import episode_files, trajectory_figure
+def _episode_logs(pc: PlotConfig, run_dir: Path) -> list[Path]:
+    """The episode logs an eval run's figures are drawn from: the first `plot.max_episodes` (0: all), in episode
+    order; a clear error where the run holds none."""
+    from stafpipe.plots.trajectories import episode_files
 
     files = episode_files(run_dir)
     if not files:
         raise StafpipeError(
             f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
         )
-    if pc.max_episodes:
-        files = files[: pc.max_episodes]
+    return files[: pc.max_episodes] if pc.max_episodes else files
+
+
+def _trajectory_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
+    from stafpipe.episode_log import read_episode
+    from stafpipe.plots.trajectories import trajectory_figure
+
+    files = _episode_logs(pc, run_dir)
     records = [read_episode(f) for f in files]  # all read (and validated) before anything is written
     return {f"trajectories_{path.stem}": trajectory_figure(rec) for path, rec in zip(files, records, strict=True)}
 
 
 def _connectivity_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     from stafpipe.episode_log import read_episode
-    from stafpipe.plots.trajectories import connectivity_figure, episode_files
+    from stafpipe.plots.trajectories import connectivity_figure
 
-    files = episode_files(run_dir)
-    if not files:
-        raise StafpipeError(
-            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
-        )
-    files = files[: pc.max_episodes] if pc.max_episodes else files
+    files = _episode_logs(pc, run_dir)
     return {"connectivity": connectivity_figure([read_episode(f) for f in files])}
 
 
 def _region_figures(pc: PlotConfig, run_dir: Path) -> dict[str, Figure]:
     from stafpipe.episode_log import read_episode
-    from stafpipe.plots.trajectories import episode_files
     from stafpipe.plots.zhu import regions_figure, snapshot_times
 
-    files = episode_files(run_dir)
-    if not files:
-        raise StafpipeError(
-            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
-        )
-    files = files[: pc.max_episodes] if pc.max_episodes else files
+    files = _episode_logs(pc, run_dir)
     records = [read_episode(f) for f in files]
     return {
         f"regions_{path.stem}": regions_figure(rec, list(pc.times) or snapshot_times(rec))
@@ -180,14 +176,8 @@ def _adaptation_figures(pc: PlotConfig, run_dir: Path, out_dir: Path) -> dict[st
     from stafpipe.episode_log import read_episode
     from stafpipe.metrics import MetricContext
     from stafpipe.plots.adaptation import adaptation_figure
-    from stafpipe.plots.trajectories import episode_files
 
-    files = episode_files(run_dir)
-    if not files:
-        raise StafpipeError(
-            f"plot.run_dir: {run_dir} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
-        )
-    files = files[: pc.max_episodes] if pc.max_episodes else files
+    files = _episode_logs(pc, run_dir)
     series = {}
     for path in files:
         rec = read_episode(path)
@@ -255,18 +245,9 @@ def _videos(pc: PlotConfig, source: Path, out_dir: Path) -> list[Path]:
     or of one episode's .mcap file. Every log is read before the first video is written, and each video is streamed
     into a temporary file renamed into place once whole."""
     from stafpipe.episode_log import read_episode
-    from stafpipe.plots.trajectories import episode_files
     from stafpipe.plots.video import episode_frames, write_video
 
-    if source.is_file():
-        files = [source]
-    else:
-        files = episode_files(source)
-        if not files:
-            raise StafpipeError(
-                f"plot.run_dir: {source} holds no episodes/*.mcap (is it an eval run with eval.log_episodes?)"
-            )
-        files = files[: pc.max_episodes] if pc.max_episodes else files
+    files = [source] if source.is_file() else _episode_logs(pc, source)
     records = [read_episode(f) for f in files]
     outputs: list[Path] = []
     for path, rec in zip(files, records, strict=True):
