@@ -15,7 +15,7 @@ from conftest import job_dirs
 from stafpipe.cli import app
 from stafpipe.episode_log import read_episode
 from stafpipe.launch import launch
-from stafpipe.plots.video import episode_frames, frame_count, frame_indices
+from stafpipe.plots.video import episode_frames, frame_indices
 
 
 def _episode(workdir):
@@ -28,7 +28,7 @@ def test_frame_indices_keep_the_first_and_the_last_step() -> None:
     assert frame_indices(10, 4) == [0, 4, 8, 9]
     assert frame_indices(9, 4) == [0, 4, 8]
     assert frame_indices(5, 1) == [0, 1, 2, 3, 4]
-    assert frame_count(31, 3) == 11
+    assert len(frame_indices(31, 3)) == 11
 
 
 @pytest.mark.slow  # an eval and two encoders: about 5 s on 2 cores
@@ -43,10 +43,10 @@ def test_video_of_an_eval_run_and_of_a_file_has_one_frame_per_stride(workdir) ->
     from_run, from_file = job_dirs(workdir / "outputs" / "plot")
     for path, stride in ((from_run / "video_episode_0000.mp4", 4), (from_run / "video_episode_0000.gif", 4)):
         frames = imageio.mimread(path, memtest=False)
-        assert len(frames) == frame_count(steps, stride), path
+        assert len(frames) == len(frame_indices(steps, stride)), path
         assert frames[0].shape[1] == 320
         assert not np.array_equal(frames[0], frames[-1])  # the robots moved and the clock ran
-    assert len(imageio.mimread(from_file / "video_episode_0000.gif", memtest=False)) == frame_count(steps, 7)
+    assert len(imageio.mimread(from_file / "video_episode_0000.gif", memtest=False)) == len(frame_indices(steps, 7))
     assert not (from_file / "video_episode_0000.mp4").exists()
     assert not list(from_run.glob(".*tmp*"))
     (run / "episodes" / "episode_0001.mcap").write_bytes(b"not a log")  # every log is read before a video is written

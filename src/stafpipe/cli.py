@@ -188,7 +188,7 @@ def run(
 def compare(
     ctx: typer.Context,
     methods: str = typer.Option(
-        "staf,staf_planned,dgnn,lf,zhu,cezayirli", "--methods", help="Comma-separated methods to run."
+        "", "--methods", help="Comma-separated methods to run (default: every method of the papers and ours)."
     ),
     name: str = typer.Option(
         "", "--name", help="The compare's directory under outputs/pipelines/ (default: compare-SCENARIO)."

@@ -16,11 +16,10 @@ from pathlib import Path
 
 from stafpipe.controllers import METHODS
 from stafpipe.errors import StafpipeError
+from stafpipe.interrupt import INTERRUPTED
 from stafpipe.io import atomic_write
 from stafpipe.pipeline import Pipeline, PipelineStep, plan_pipeline, run_step
 
-INTERRUPTED = 130
-"""The exit code of a stage stopped by Ctrl-C or SIGTERM (launch.stage_task): the compare stops too."""
 COMPARE_METHODS = ("staf", "staf_planned", "dgnn", "lf", "zhu", "cezayirli")
 """Every method of the three papers and ours; `straight` (a test fixture) only when asked for."""
 
@@ -53,7 +52,10 @@ def _error_line(text: str) -> str:
 
 
 def parse_methods(text: str) -> list[str]:
-    """`--methods a,b`: known methods, in the order given, each once; a clear error naming an unknown one."""
+    """`--methods a,b`: known methods, in the order given, each once (empty: `COMPARE_METHODS`); a clear error
+    naming an unknown one."""
+    if not text.strip():
+        return list(COMPARE_METHODS)
     methods = [m.strip() for m in text.split(",") if m.strip()]
     unknown = [m for m in methods if m not in METHODS]
     if not methods or unknown:

@@ -9,6 +9,9 @@ import signal
 from collections.abc import Iterator
 from types import FrameType
 
+INTERRUPTED = 130
+"""The exit code of a stage stopped by Ctrl-C or SIGTERM (128 + SIGINT, the shell's convention)."""
+
 _requested = {"signal": 0}
 
 

@@ -32,7 +32,7 @@ from stafpipe.config import register_configs
 from stafpipe.config.checks import check_run_config
 from stafpipe.config.compose import compose_config, config_name
 from stafpipe.errors import StafpipeError
-from stafpipe.interrupt import stop_at_boundaries
+from stafpipe.interrupt import INTERRUPTED, stop_at_boundaries
 from stafpipe.io import OBJECTIVE, atomic_write, write_json
 from stafpipe.paths import conf_dir
 from stafpipe.run_lock import RunDirLock
@@ -230,7 +230,7 @@ def stage_task(cfg: DictConfig) -> float | None:
         kept = "its training state is kept: the same command with resume=true goes on from it"
         gone = "its episode logs were removed and it wrote no results; the same command starts it over"
         print(f"interrupted: {cfg.stage} in {out_dir}; {kept if resumable else gone}", file=sys.stderr)
-        sys.exit(130)
+        sys.exit(INTERRUPTED)
     except StafpipeError as exc:
         if lock.held:
             lock.release()

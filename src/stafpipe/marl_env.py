@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from stafpipe.learning.config import PolicyConfig, RewardConfig
+from stafpipe.learning.features import flat_rows
 from stafpipe.learning.ppo import teams_of
 from stafpipe.learning.registry import ADAPTERS, adapter_class
 from stafpipe.learning.rollout import commands, episode_stats, step_reward, world_routes
@@ -131,8 +132,7 @@ def _pettingzoo_env() -> type:
             return self._act_space
 
         def _observe(self, feats: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-            own, edge, mask = feats["own"][0], feats["edge"][0], feats["mask"][0]
-            flat = np.concatenate([own, np.concatenate([edge, mask[..., None]], -1).reshape(len(own), -1)], -1)
+            flat = flat_rows(feats["own"][0], feats["edge"][0], feats["mask"][0])
             return {a: flat[i].astype(np.float32) for i, a in enumerate(self.possible_agents)}
 
         def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:

@@ -8,7 +8,7 @@ import dataclasses
 import logging
 import math
 import zlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -22,6 +22,9 @@ from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import AVOID_DISTANCE, AVOID_GAIN, teacher_actions
 from stafpipe.sensing import Observation
+
+if TYPE_CHECKING:
+    from stafpipe.learning.adapters import Adapter
 
 log = logging.getLogger(__name__)
 
@@ -106,7 +109,12 @@ class LearnedController(Controller):
             runs = [cfg.checkpoint or f"shipped:{cfg.name}", *paths]
             log.info("%s acts with the mean action of %d runs: %s", cfg.name, len(runs), ", ".join(runs))
         kind = adapter_class(cfg.name)
-        self.adapter = kind(self.policy.cfg, RewardConfig(), getattr(cfg, kind.plan_key, None), cfg.sensing_radius)
+        self._set_up(kind(self.policy.cfg, RewardConfig(), getattr(cfg, kind.plan_key, None), cfg.sensing_radius))
+
+    def _set_up(self, adapter: Adapter) -> None:
+        """What acting needs besides the network: the method's adapter (features, targets, subteams), one thread
+        and the speed state; every learned controller's constructor ends here."""
+        self.adapter = adapter
         # One thread: a parallel matrix product sums in another order, and a closed loop grows the last bit into
         # another trajectory (measured: DGNN's corridor wedge, 1 vs 2 threads, other TT in 4 of 5 episodes). With
         # one thread the seed fixes the episode on any number of cores; these networks are no slower with it.

@@ -23,6 +23,7 @@ from stafpipe.controllers.base import Controller
 from stafpipe.controllers.learned import LearnedController
 from stafpipe.errors import StafpipeError, require
 from stafpipe.learning.config import PolicyConfig, RewardConfig
+from stafpipe.learning.features import flat_rows
 from stafpipe.learning.registry import ADAPTERS, adapter_class
 
 
@@ -63,6 +64,12 @@ class OnnxConfig:
         check_sensing_radius(self.sensing_radius, sensing.radius, self.allow_mismatch, key)
 
 
+def _said(exc: BaseException) -> str:
+    """The first line of what onnxruntime said, or the exception's kind where it said nothing."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 class OnnxPolicy:
     """An ONNX policy on one thread (onnxruntime), called as the learned controller calls a network: (1, n, F),
     (1, n, n, E), (1, n, n) tensors -> (1, n, 2)."""
@@ -77,8 +84,9 @@ class OnnxPolicy:
         try:
             self.session = ort.InferenceSession(path, options, providers=["CPUExecutionProvider"])
         except Exception as exc:  # noqa: BLE001 (onnxruntime raises its own kinds for a file it cannot load)
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise StafpipeError(f"method.model: {path} is not an ONNX model onnxruntime can load ({first})") from None
+            raise StafpipeError(
+                f"method.model: {path} is not an ONNX model onnxruntime can load ({_said(exc)})"
+            ) from None
         self.inputs = [i.name for i in self.session.get_inputs()]
         types = {"tensor(bool)": np.bool_, "tensor(double)": np.float64, "tensor(float16)": np.float16}
         self.dtypes = {i.name: types.get(i.type, np.float32) for i in self.session.get_inputs()}
@@ -97,15 +105,14 @@ class OnnxPolicy:
         o, e, m = (x[0].numpy().astype(np.float32) for x in (own, edge, mask))
         if self.layout == "graph":
             feed = dict(zip(self.GRAPH, (o, e, m), strict=True))
-        else:  # the PettingZoo form's row of robot i: own, then for every robot j its edge features and flag
-            feed = {self.inputs[0]: np.concatenate([o, np.concatenate([e, m[..., None]], -1).reshape(len(o), -1)], -1)}
+        else:
+            feed = {self.inputs[0]: flat_rows(o, e, m)}
         feed = {k: v.astype(self.dtypes[k]) for k, v in feed.items()}
         try:
             (action,) = self.session.run([self.output], feed)
         except Exception as exc:  # noqa: BLE001 (onnxruntime's own kinds: wrong shapes, types, ranks)
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             shapes = {k: v.shape for k, v in feed.items()}
-            raise StafpipeError(f"method.model: the model refused the observation {shapes} ({first})") from None
+            raise StafpipeError(f"method.model: the model refused the observation {shapes} ({_said(exc)})") from None
         action = np.asarray(action, dtype=np.float32).reshape(-1, 2)
         if action.shape[0] != o.shape[0] or not np.isfinite(action).all():
             what = "non-finite actions" if action.shape[0] == o.shape[0] else f"actions of shape {action.shape}"
@@ -125,9 +132,5 @@ class OnnxController(LearnedController):
         self.made_by: dict[str, Any] = {}
         self._acts = [OnnxPolicy(cfg.model)]
         self.trained_speed = math.inf  # actions are fractions of the robot's own top speed, as the environment's
-        kind = adapter_class(cfg.features)
-        self.adapter = kind(PolicyConfig(), RewardConfig(), None, cfg.sensing_radius)  # marl_env's defaults
-        torch.set_num_threads(1)
-        self.max_speed = self.command_speed = 1.0
-        self._capped_at = math.inf
-        self.last_time = 0.0
+        # the features with marl_env's default settings, as the policy saw them in the environment
+        self._set_up(adapter_class(cfg.features)(PolicyConfig(), RewardConfig(), None, cfg.sensing_radius))

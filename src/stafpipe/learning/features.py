@@ -169,3 +169,9 @@ def staf_pairs(
         axis=-1,
     )
     return own.astype(np.float32), i, diff.astype(np.float32)
+
+
+def flat_rows(own: np.ndarray, edge: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(n, F + n (E + 1)) one team's features as one row per robot, the PettingZoo form's observation
+    (`stafpipe.marl_env`): its own features, then for every robot j its edge features and whether it is heard."""
+    return np.concatenate([own, np.concatenate([edge, mask[..., None]], -1).reshape(len(own), -1)], -1)

@@ -367,6 +367,13 @@ def best_iteration(history: list[dict[str, float]]) -> int | None:
     """The iteration whose weights are shipped: the highest validation success rate, then the fewest collisions,
     then the earliest; 0 is the warm-started network (judged before the first iteration, its numbers in the first
     row as `imitation/val_*`); None without validation rows."""
+    top = best_validation(history)
+    return None if top is None else int(top["iteration"])
+
+
+def best_validation(history: list[dict[str, float]]) -> dict[str, float] | None:
+    """The validation row of `best_iteration` (iteration, val/success_rate, val/collisions_per_episode); None without
+    validation rows."""
     rows = [r for r in history if "val/success_rate" in r]
     if history and "imitation/val_success_rate" in history[0]:
         first = history[0]
@@ -374,8 +381,7 @@ def best_iteration(history: list[dict[str, float]]) -> int | None:
         rows.insert(0, {"iteration": 0, "val/success_rate": sr, "val/collisions_per_episode": hits})
     if not rows:
         return None
-    top = max(rows, key=lambda r: (r["val/success_rate"], -r["val/collisions_per_episode"], -r["iteration"]))
-    return int(top["iteration"])
+    return max(rows, key=lambda r: (r["val/success_rate"], -r["val/collisions_per_episode"], -r["iteration"]))
 
 
 def initial_weights(tc: TrainPPOConfig) -> PolicyNet:

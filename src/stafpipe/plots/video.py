@@ -2,7 +2,8 @@
 map, the team's path with its passages, every robot as a disc of its true radius coloured by its subteam with its
 heading, the team's goals and each robot's current target (the controller's, where it has one), the moving obstacles,
 a clock and the last split or merge. Frames are drawn by matplotlib's Agg canvas with the map drawn once (blitting)
-and streamed to the encoders one at a time (docs/usage.md, "Videos")."""
+and handed to the encoders one at a time: the MP4 encoder streams them to ffmpeg, the GIF encoder (Pillow) keeps
+every frame until it writes the file (docs/usage.md, "Videos")."""
 
 from __future__ import annotations
 
@@ -27,11 +28,6 @@ MACRO_BLOCK = 16
 rescale each frame)."""
 
 
-def frame_count(steps: int, stride: int) -> int:
-    """Frames of a video of `steps` logged states drawn every `stride`-th one, the first and the last always."""
-    return len(frame_indices(steps, stride))
-
-
 def frame_indices(steps: int, stride: int) -> list[int]:
     """The logged states a video shows: every `stride`-th from the first, and the last (where the episode ends)."""
     picked = list(range(0, steps, stride))
@@ -40,14 +36,13 @@ def frame_indices(steps: int, stride: int) -> list[int]:
     return picked
 
 
-def _passage_segments(context: dict[str, Any]) -> list[np.ndarray]:
-    """The stretches of the team's path inside a passage (`MetricContext.passages`), as (k, 2) polylines."""
-    path = np.asarray(context.get("path", ()), float)
+def _passage_segments(path: np.ndarray, passages: Any) -> list[np.ndarray]:
+    """The stretches of the team's `path` (K, 2) inside a passage (`MetricContext.passages`), as (k, 2) polylines."""
     if len(path) < 2:
         return []
     frame = PathFrame(path)
     out = []
-    for lo, hi in context.get("passages", ()):
+    for lo, hi in passages:
         s = np.linspace(float(lo), float(hi), 24)
         points, _ = frame.at(s)
         out.append(np.asarray(points))
@@ -78,7 +73,7 @@ class _Frames:
         path = np.asarray(rec.context.get("path", ()), float)
         if len(path) >= 2:
             ax.plot(path[:, 0], path[:, 1], color="0.75", lw=1.0, ls=":")
-        for k, seg in enumerate(_passage_segments(rec.context)):
+        for k, seg in enumerate(_passage_segments(path, rec.context.get("passages", ()))):
             ax.plot(seg[:, 0], seg[:, 1], color="tab:orange", lw=4.0, alpha=0.35, label="passage" if k == 0 else None)
         ax.scatter(rec.goal[:, 0], rec.goal[:, 1], s=18, marker="x", color="k", linewidths=0.8, label="goal")
         radius = float(rec.context.get("robot_radius", 0.1))

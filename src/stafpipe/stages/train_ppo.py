@@ -74,23 +74,16 @@ def validation_batches(tc: TrainPPOConfig, cfg: DictConfig, training: set[str]) 
 
 def kept_score(history: list[dict[str, float]]) -> dict[str, object]:
     """What a search maximises (`objective.json`): the validation success rate of the iteration whose weights
-    `policy.pt` holds (`best_iteration`; the warm start's as iteration 0), or, without validation scenarios, the
-    last iteration's training success rate. Each names itself."""
-    from stafpipe.learning.ppo import best_iteration
+    `policy.pt` holds (`best_validation`; the warm start's as iteration 0), or, without validation scenarios, the
+    last iteration's training success rate (a run trains at least one iteration). Each names itself."""
+    from stafpipe.learning.ppo import best_validation
 
-    chosen = best_iteration(history)
-    if chosen is None:
-        last = history[-1] if history else {}
-        return {
-            "name": "charts/success_rate of the last iteration",
-            "value": float(last.get("charts/success_rate", 0.0)),
-            "direction": "maximize",
-        }
-    if chosen == 0:
-        value = history[0]["imitation/val_success_rate"]
+    top = best_validation(history)
+    if top is None:
+        value, name = history[-1]["charts/success_rate"], "charts/success_rate of the last iteration"
     else:
-        value = next(r["val/success_rate"] for r in history if r["iteration"] == chosen and "val/success_rate" in r)
-    return {"name": f"val/success_rate of iteration {chosen} (kept)", "value": float(value), "direction": "maximize"}
+        value, name = top["val/success_rate"], f"val/success_rate of iteration {int(top['iteration'])} (kept)"
+    return {"name": name, "value": float(value), "direction": "maximize"}
 
 
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
