@@ -54,12 +54,13 @@ every job of a sweep before its first job runs)."""
 
 def _scenario_fields_beside_path(cfg: DictConfig, overrides: Sequence[str]) -> None:
     """`scenario.path` replaces the scenario group's fields with the file's, so a `scenario.<field>=` override beside
-    it would be dropped without a word (a time limit, say, with the file's own in force): refused, naming the key."""
+    it would be dropped without a word (a time limit, say, with the file's own in force), and so would a choice of
+    built-in scenario (`scenario=bridge`): both refused, naming the key."""
     if "scenario" not in cfg or cfg.scenario is None or not cfg.scenario.get("path"):
         return
     for override in overrides:
         key = override.split("=", 1)[0].lstrip("+~").strip()
-        if key.startswith("scenario.") and key != "scenario.path":
+        if key == "scenario" or (key.startswith("scenario.") and key != "scenario.path"):
             raise ConfigError(
                 f"{key}: not applied beside scenario.path (the scenario file replaces the scenario's fields); "
                 f"set it in {cfg.scenario.path}, or leave scenario.path out"
