@@ -4,25 +4,41 @@ network, the same minibatches and epochs, one forward, a squared-error loss on i
 nothing else (what any trainer of this network must pay; the PPO update's excess over it is our overhead).
 
 Usage: python benchmarks/ppo_throughput.py [--steps 100]
+       python benchmarks/ppo_throughput.py --workers 1 2 [--worlds 64] [--iterations 6] [--project 16]
 Prints one row per number of batched worlds (B = 4, 16, 64) and the device (CPU, 2 threads), then the rate at which
 the update does the network's arithmetic (floating-point operations counted by torch's FlopCounterMode on the
 forward and backward passes over each row's own rollout, Adam's few per weight left out) beside two references on
 the same device: a 2048 x 2048 matrix product (about what the machine computes at all) and a stack of 64-wide linear
 layers, forward and backward (the width of the network's layers, without its gathers, sums and activations).
+
+With `--workers`, the whole trainer instead (`stafpipe train-ppo`, DGNN on the corridor, `train_ppo.workers`, DD-PPO):
+one worker with one torch thread (what a bit-reproducible run uses, docs/decisions.md) and with a thread per core,
+then each larger count of workers with the cores shared out (threads = cores // workers); the overall robot-steps/s
+(the median over the iterations after the first, which pays for warming up) with where an iteration's time goes
+(the rollout; the update, and of it the gradient exchange, waiting for the slowest worker included), the speed-up
+over both one-worker rows, and with `--project N` a row for N workers computed from the measured parts.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
+import pandas as pd
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
+from stafpipe.learning.distributed import joined, launch, leave
 from stafpipe.learning.ppo import teams_of, update
-from stafpipe.learning.registry import ADAPTERS
+from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import collect, gae
 from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig
@@ -34,7 +50,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--device", default="cpu", help="where the update runs: cpu, cuda or cuda:N")
+    parser.add_argument("--workers", type=int, nargs="*", help="train-ppo.workers counts to compare (the trainer)")
+    parser.add_argument("--worlds", type=int, default=64, help="with --workers: worlds per iteration")
+    parser.add_argument("--iterations", type=int, default=6, help="with --workers: iterations per run")
+    parser.add_argument("--project", type=int, default=0, help="with --workers: a projected row for this many")
     args = parser.parse_args()
+    if args.workers:
+        compare_workers(args.workers, args.worlds, args.iterations, args.steps, args.project)
+        return
     device = training_device(args.device, "--device")
     torch.set_num_threads(2)
     torch.manual_seed(0)
@@ -73,7 +96,7 @@ def measure(b: int, steps: int, device: torch.device) -> tuple[int, float, float
     opt = torch.optim.Adam(policy.parameters(), lr=tc.lr)
     worlds = Worlds([corridor] * b, SensingConfig())
     obs = worlds.reset(list(range(b)))
-    adapter = ADAPTERS["dgnn"](tc.policy, tc.reward, None, 2.0)
+    adapter = adapter_class("dgnn")(tc.policy, tc.reward, None, 2.0)
     adapter.begin(teams_of([(corridor, path, eta)] * b, worlds))
     start = time.perf_counter()
     ro, _ = collect(policy, adapter, worlds, obs, tc, 0.3)
@@ -162,6 +185,87 @@ def plain_update(policy: DGNNPolicy, ro, tc: TrainPPOConfig, device: torch.devic
     seconds = time.perf_counter() - start
     policy.cpu()
     return seconds
+
+
+def _trainer_run(workers: int, threads: int, worlds: int, steps: int, iterations: int) -> dict[str, float]:
+    """One `stafpipe train-ppo` run (DGNN, corridor, seed 0): the medians over its iterations after the first (which
+    pays for warming up) of the rollout, update and gradient-exchange seconds and the overall robot-steps/s."""
+    with tempfile.TemporaryDirectory() as tmp:
+        words = [
+            f"train_ppo.workers={workers}",
+            f"train_ppo.threads={threads}",
+            f"train_ppo.worlds={worlds}",
+            f"train_ppo.episode_steps={steps}",
+            f"train_ppo.iterations={iterations}",
+            "train_ppo.eval_every=0",
+            f"train_ppo.checkpoint_every={iterations}",
+            f"hydra.run.dir={tmp}/run",
+        ]
+        subprocess.run([sys.executable, "-m", "stafpipe", "train-ppo", *words], check=True, capture_output=True)
+        rows = pd.read_csv(Path(tmp) / "run" / "learning_curves.csv")
+    samples = rows["robot_steps"].diff().fillna(rows["robot_steps"])
+    rows = rows.assign(rollout_seconds=samples / rows["charts/rollout_fps"]).iloc[1:]
+    exchange = rows["charts/exchange_seconds"] if "charts/exchange_seconds" in rows else pd.Series([0.0])
+    return {
+        "rollout": statistics.median(rows["rollout_seconds"]),
+        "update": statistics.median(rows["charts/update_seconds"]),
+        "exchange": statistics.median(exchange),
+        "rate": statistics.median(rows["charts/fps"]),
+        "samples": statistics.median(samples),
+    }
+
+
+def compare_workers(counts: list[int], worlds: int, iterations: int, steps: int, project: int) -> None:
+    """`stafpipe train-ppo` runs for one worker with one thread and with every core's, then for each larger count of
+    workers with the cores shared out; the same worlds and seed. Prints the table, and with `project` a row for that
+    many workers computed from the measured parts (labelled as such)."""
+    cores = os.cpu_count() or 1
+    runs = [(1, 1), (1, cores)] + [(n, max(1, cores // n)) for n in counts if n > 1]
+    print(f"train-ppo, DGNN on the corridor, {worlds} worlds x {steps} steps, {iterations} iterations, {cores} cores")
+    print(
+        f"{'workers':>7} | {'threads each':>12} | {'rollout s':>9} | {'update s':>8} | {'of it exchange s':>16} | "
+        f"{'overall robot-steps/s':>21} | {'x (1 w, 1 thread)':>17} | {f'x (1 w, {cores} threads)':>18}"
+    )
+    print("-" * 130)
+    got = {}
+    for n, threads in dict.fromkeys(runs):
+        got[n, threads] = m = _trainer_run(n, threads, worlds, steps, iterations)
+        _row(str(n), threads, m, got[1, 1]["rate"], got.get((1, cores), m)["rate"])
+    if project > 1:
+        # the parts of one iteration at `project` workers, one core each: the rollout of worlds / project worlds
+        # measured in one process; the one-thread update divided by the workers; the exchange, one all-reduce of the
+        # network's gradient per minibatch, at the latency measured between 2 processes times (project - 1) (a ring
+        # all-reduce takes 2 (N - 1) steps, 2 at N = 2); no waiting for a slower worker counted
+        share = _trainer_run(1, 1, max(1, worlds // project), steps, iterations)
+        per_call = launch(2, _all_reduce_seconds, sum(p.numel() for p in DGNNPolicy(PolicyConfig()).parameters()))
+        calls = TrainPPOConfig().epochs * TrainPPOConfig().minibatches
+        parts = {"rollout": share["rollout"], "exchange": per_call * calls * (project - 1)}
+        parts["update"] = got[1, 1]["update"] / project + parts["exchange"]
+        parts["rate"] = got[1, 1]["samples"] / (parts["rollout"] + parts["update"])
+        print(f"projected from: one all-reduce of the gradient between 2 processes {1e3 * per_call:.1f} ms")
+        _row(f"{project}*", 1, parts, got[1, 1]["rate"], got.get((1, cores), parts)["rate"])
+
+
+def _all_reduce_seconds(size: int) -> float:
+    """The mean time of one all-reduce of `size` floats among the launched processes (gloo), after a first one."""
+    import torch.distributed as dist
+
+    joined()
+    x = torch.zeros(size)
+    dist.all_reduce(x)
+    start = time.perf_counter()
+    for _ in range(50):
+        dist.all_reduce(x)
+    seconds = (time.perf_counter() - start) / 50
+    leave()
+    return seconds
+
+
+def _row(name: str, threads: int, m: dict[str, float], one: float, many: float) -> None:
+    print(
+        f"{name:>7} | {threads:>12} | {m['rollout']:>9.2f} | {m['update']:>8.2f} | {m['exchange']:>16.2f} | "
+        f"{m['rate']:>21,.0f} | {m['rate'] / one:>16.2f}x | {m['rate'] / many:>17.2f}x"
+    )
 
 
 if __name__ == "__main__":

@@ -175,6 +175,12 @@ class TrainPPOConfig:
     resume: bool = False
     """Continue from the newest state of the same config (this run directory first, then outputs/train-ppo/)."""
     threads: int = 2
+    """Torch threads of each training process."""
+    workers: int = 1
+    """Training processes (DD-PPO, learning/distributed.py): each steps `worlds / workers` of the worlds and
+    computes the update's gradients on its own samples, averaged over the workers at every minibatch; started on this
+    machine by torch.distributed's elastic launcher (torchrun's). A seed and the number of workers fix the result;
+    1 runs in this process with no torch.distributed at all. The warm start runs on one worker."""
     device: str = "cpu"
     """Where the PPO update runs: `cpu`, or `cuda` / `cuda:N` where the machine has one (a clear error where it has
     not). The rollouts (simulator, features, the policy's forward pass) stay on the CPU; the checkpoint is for the
@@ -215,6 +221,13 @@ class TrainPPOConfig:
             require(0.0 <= value <= 1.0, f"{key}.imitation.{name}", "must be in [0, 1]", value)
         for name in ("iterations", "worlds", "episode_steps", "epochs", "minibatches", "checkpoint_every", "threads"):
             require(getattr(self, name) >= 1, f"{key}.{name}", "must be >= 1", getattr(self, name))
+        require(self.workers >= 1, f"{key}.workers", "must be >= 1", self.workers)
+        require(
+            self.worlds % self.workers == 0,
+            f"{key}.worlds",
+            f"must be a multiple of train_ppo.workers ({self.workers}): each worker steps an equal share",
+            self.worlds,
+        )
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
         require(
             not self.policy.drive_input or self.method in ("staf", "staf_planned"),

@@ -25,6 +25,7 @@ from stafpipe.controllers.base import TeamInfo
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.adapters import Adapter
 from stafpipe.learning.config import TrainPPOConfig
+from stafpipe.learning.distributed import ALONE, Workers
 from stafpipe.learning.features import Features
 from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.learning.registry import adapter_class
@@ -55,10 +56,12 @@ def update(
     tc: TrainPPOConfig,
     gen: torch.Generator,
     device: torch.device | None = None,
+    workers: Workers = ALONE,
 ) -> dict[str, float]:
     """`tc.epochs` passes of minibatch updates over world-steps (a sample keeps its world's n robots together). On
     `device` (train_ppo.device) the network, its optimizer state and the samples move there for the update; the
-    network comes back to the CPU for the next rollout."""
+    network comes back to the CPU for the next rollout. With `workers`, each worker's minibatches are of its own
+    samples and every step uses the gradient averaged over the workers (DD-PPO, learning/distributed.py)."""
     if device is not None and device.type != "cpu":
         policy.to(device)  # in place: the optimizer keeps the same parameters
         for state in opt.state.values():
@@ -66,7 +69,7 @@ def update(
                 if torch.is_tensor(value):
                     state[name] = value.to(device)
         try:
-            return update(policy, opt, _on(ro, device), adv.to(device), ret.to(device), tc, gen)
+            return update(policy, opt, _on(ro, device), adv.to(device), ret.to(device), tc, gen, None, workers)
         finally:
             policy.cpu()
     t, b = ro.rewards.shape[:2]
@@ -78,6 +81,7 @@ def update(
     # on a GPU that wait at every minibatch was most of the update's excess over the network's own cost
     # (benchmarks/ppo_throughput.py)
     stats: list[torch.Tensor] = []
+    exchange = 0.0  # seconds in the workers' gradient all-reduce, waiting for the slowest included
     for _ in range(tc.epochs):
         order = torch.randperm(t * b, generator=gen).to(b_own.device)
         for k in range(tc.minibatches):
@@ -94,6 +98,9 @@ def update(
             loss = pg_loss + tc.vf_coef * v_loss - tc.ent_coef * entropy
             opt.zero_grad()
             loss.backward()
+            began = time.perf_counter()
+            workers.average_gradients(policy.parameters())
+            exchange += time.perf_counter() - began
             torch.nn.utils.clip_grad_norm_(policy.parameters(), tc.max_grad_norm)
             opt.step()
             with torch.no_grad():
@@ -107,7 +114,10 @@ def update(
             "train_ppo: the PPO update's losses are not finite (NaN or inf): training diverged; a lower "
             "train_ppo.lr or train_ppo.max_grad_norm may help"
         )
-    return {name: sum((row[c] for row in rows), 0.0) / len(rows) for c, name in enumerate(names)}
+    losses = workers.mean({name: sum((row[c] for row in rows), 0.0) / len(rows) for c, name in enumerate(names)})
+    if workers.size > 1:
+        losses["charts/exchange_seconds"] = workers.total([exchange], "max")[0]
+    return losses
 
 
 Drawn = tuple[Scenario, np.ndarray, float]
@@ -258,9 +268,15 @@ def train_ppo(
     resume_from: Path | None,
     on_iteration: Callable[[list[dict[str, float]]], None],
     validation: list[list[Drawn]] | None = None,
+    workers: Workers = ALONE,
 ) -> tuple[PolicyNet, list[dict[str, float]]]:
     """Train; after every `checkpoint_every` iterations (and the last) `out_dir/ppo_state.pt` holds the whole state.
-    With `validation` (batches of held-out worlds), the returned network is the one of `best_iteration`."""
+    With `validation` (batches of held-out worlds), the returned network is the one of `best_iteration`.
+
+    With `workers` (DD-PPO, learning/distributed.py) every worker draws the same worlds and steps its share of
+    them, the update averages their gradients, and every statistic is averaged over them, so every worker ends with
+    the same weights and the same history; the main worker alone runs the warm start, writes the state and calls
+    `on_iteration`."""
     torch.set_num_threads(tc.threads)
     device = training_device(tc.device, "train_ppo.device")
     torch.manual_seed(seed)
@@ -269,25 +285,34 @@ def train_ppo(
     policy = adapter.network(tc.policy)
     if tc.init_from and resume_from is None:
         policy.load_state_dict(initial_weights(tc).state_dict())
+    if not workers.main:  # the same initial weights as the main worker's, then action noise of its own
+        torch.manual_seed(workers.seed(seed))
     history: list[dict[str, float]] = []
     start = 0
     warm: dict[str, float] = {}
     best: dict[str, Any] = {}  # the weights of the best validation iteration so far
     opt = torch.optim.Adam(policy.parameters(), lr=tc.lr, eps=1e-5)
-    gen = torch.Generator().manual_seed(seed)
+    gen = torch.Generator().manual_seed(workers.seed(seed))
     if resume_from is None and tc.imitation.epochs > 0:
-        warm = imitate(policy, adapter, draw_scenarios, world_cfg, sensing, tc, seed)
+        if workers.main:
+            warm = imitate(policy, adapter, draw_scenarios, world_cfg, sensing, tc, seed)
+        warm = workers.from_main(policy, warm)
         if validation:  # the warm-started network is a candidate too (iteration 0): PPO may not improve on it
-            judged = validate(policy, adapter, validation, world_cfg, sensing, tc, tolerance)
+            judged = validate(policy, adapter, validation, world_cfg, sensing, tc, tolerance, workers)
             warm.update({f"imitation/{k.replace('/', '_')}": v for k, v in judged.items()})
             best = {"iteration": 0, "policy": copy.deepcopy(policy.state_dict())}
-        _save(out_dir, config_hash, 0, policy, opt, gen, [], warm, best)  # a kill after the warm start: not redone
+        _save(out_dir, config_hash, 0, policy, opt, gen, [], warm, best, workers)  # a kill after it: not redone
     if resume_from is not None:
         state = torch.load(resume_from, map_location="cpu", weights_only=True)
         policy.load_state_dict(state["policy"])
         opt.load_state_dict(state["optimizer"])
-        torch.set_rng_state(state["torch_rng"])
-        gen.set_state(state["minibatch_rng"])
+        rngs = state.get("worker_rngs", [(state["torch_rng"], state["minibatch_rng"])])
+        if len(rngs) != workers.size:
+            raise StafpipeError(
+                f"train_ppo.resume: {resume_from} was saved by {len(rngs)} workers, this run has {workers.size}"
+            )
+        torch.set_rng_state(rngs[workers.rank][0])
+        gen.set_state(rngs[workers.rank][1])
         history, start = state["history"], int(state["iteration"])
         warm = state.get("warm", {})
         best = state.get("best", {})
@@ -296,35 +321,39 @@ def train_ppo(
     for it in bar:
         began = time.perf_counter()
         rng = np.random.default_rng([seed, it])
-        drawn = draw_scenarios(rng, tc.worlds)  # (scenario, its team-centre shortest path, eta) per world
+        mine = workers.share(tc.worlds)  # every worker draws every world and keeps its own share
+        everyone = draw_scenarios(rng, tc.worlds)  # (scenario, its team-centre shortest path, eta) per world
+        drawn = [everyone[w] for w in mine]
         worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)
-        obs = worlds.reset([int(x) for x in rng.integers(0, 2**31, tc.worlds)])
+        reset_seeds = [int(x) for x in rng.integers(0, 2**31, tc.worlds)]
+        obs = worlds.reset([reset_seeds[w] for w in mine])
         adapter.begin(teams_of(drawn, worlds))
         ro, stats = collect(policy, adapter, worlds, obs, tc, tolerance)
         collected = time.perf_counter()
         adv, ret = gae(ro.rewards, ro.values, ro.last_value, tc.gamma, tc.gae_lambda)
-        losses = update(policy, opt, ro, adv, ret, tc, gen, device)
+        losses = update(policy, opt, ro, adv, ret, tc, gen, device, workers)
         done = time.perf_counter()
-        samples = ro.rewards.numel()
+        samples = ro.rewards.numel() * workers.size
+        rollout_s, update_s, total_s = workers.total([collected - began, done - collected, done - began], "max")
         done_before = history[-1]["robot_steps"] if history else 0.0  # team sizes differ between iterations
         row = {
             "iteration": it + 1,
             "robot_steps": float(done_before + samples),
-            **{f"charts/{k}": v for k, v in stats.items()},
+            **{f"charts/{k}": v for k, v in workers.mean(stats).items()},
             **losses,
-            "charts/fps": samples / (done - began),
-            "charts/rollout_fps": samples / (collected - began),
-            "charts/update_seconds": done - collected,
+            "charts/fps": samples / total_s,
+            "charts/rollout_fps": samples / rollout_s,
+            "charts/update_seconds": update_s,
             "charts/log_std": float(policy.log_std.detach().mean()),
         }
         if tc.eval_every and ((it + 1) % tc.eval_every == 0 or it + 1 == tc.iterations):
             worlds = Worlds([d[0] for d in drawn], sensing, world_cfg)  # same scenarios, fixed evaluation seeds
-            obs = worlds.reset([EVAL_SEED + w for w in range(tc.worlds)])
+            obs = worlds.reset([EVAL_SEED + w for w in mine])
             adapter.begin(teams_of(drawn, worlds))
             _, ev = collect(policy, adapter, worlds, obs, tc, tolerance, deterministic=True)
-            row.update({f"eval/{k}": v for k, v in ev.items()})
+            row.update({f"eval/{k}": v for k, v in workers.mean(ev).items()})
             if validation:
-                row.update(validate(policy, adapter, validation, world_cfg, sensing, tc, tolerance))
+                row.update(validate(policy, adapter, validation, world_cfg, sensing, tc, tolerance, workers))
         if it == 0:
             row.update(warm)
         history.append(row)
@@ -332,8 +361,10 @@ def train_ppo(
             best = {"iteration": it + 1, "policy": copy.deepcopy(policy.state_dict())}
         bar.set_postfix(sr=f"{stats['success_rate']:.2f}", ret=f"{stats['episode_return']:.1f}")
         if (it + 1) % tc.checkpoint_every == 0 or it + 1 == tc.iterations:
-            _save(out_dir, config_hash, it + 1, policy, opt, gen, history, warm, best)
-        on_iteration(history)
+            _save(out_dir, config_hash, it + 1, policy, opt, gen, history, warm, best, workers)
+        if workers.main:
+            on_iteration(history)
+    workers.check_in_step(policy)
     if best:
         policy.load_state_dict(best["policy"])
         log.info("the shipped weights are iteration %d's (best on the validation maps)", best["iteration"])
@@ -348,11 +379,13 @@ def validate(
     sensing: SensingConfig,
     tc: TrainPPOConfig,
     tolerance: float,
+    workers: Workers = ALONE,
 ) -> dict[str, float]:
     """The mean action on the held-out worlds (the same seeds every time): `val/success_rate` and
-    `val/collisions_per_episode`, averaged over every episode."""
+    `val/collisions_per_episode`, averaged over every episode; with `workers`, the batches dealt out among them
+    (a batch's result does not depend on who runs it)."""
     episodes, sr, hits = 0, 0.0, 0.0
-    for batch in batches:
+    for batch in batches[workers.rank :: workers.size]:
         worlds = Worlds([d[0] for d in batch], sensing, world_cfg)
         obs = worlds.reset([VALIDATION_SEED + w for w in range(len(batch))])
         adapter.begin(teams_of(batch, worlds))
@@ -360,7 +393,8 @@ def validate(
         episodes += len(batch)
         sr += ev["success_rate"] * len(batch)
         hits += ev["collisions_per_episode"] * len(batch)
-    return {"val/success_rate": sr / episodes, "val/collisions_per_episode": hits / episodes}
+    seen, sr, hits = workers.total([float(episodes), sr, hits])
+    return {"val/success_rate": sr / seen, "val/collisions_per_episode": hits / seen}
 
 
 def best_iteration(history: list[dict[str, float]]) -> int | None:
@@ -409,11 +443,17 @@ def _save(
     history: list[dict[str, float]],
     warm: dict[str, float],
     best: dict[str, Any] | None = None,
+    workers: Workers = ALONE,
 ) -> None:
-    """The whole training state after `iteration` iterations (0: after the warm start), an exact resume point."""
+    """The whole training state after `iteration` iterations (0: after the warm start), an exact resume point;
+    with several workers, every worker's random states too (`worker_rngs`), written by the main one."""
+    rngs = workers.gather((torch.get_rng_state(), gen.get_state()))
+    if not workers.main:
+        return
     save_payload(
         out_dir / STATE_FILE,
         {
+            **({"worker_rngs": rngs} if workers.size > 1 else {}),
             "config_hash": config_hash,
             "iteration": iteration,
             "policy": policy.state_dict(),

@@ -19,12 +19,14 @@ from omegaconf import DictConfig, OmegaConf
 from stafpipe.errors import StafpipeError
 from stafpipe.io import OBJECTIVE, save_figure, write_json, write_table
 from stafpipe.learning.config import TrainPPOConfig
+from stafpipe.learning.distributed import ALONE, Workers, joined, launch, leave
 from stafpipe.progress import progress
 from stafpipe.scenario import Scenario
 from stafpipe.scenario_pool import curriculum, path_and_width, scenario_pool
 from stafpipe.sections import section
 
 if TYPE_CHECKING:
+    from stafpipe.learning.policy_net import PolicyNet
     from stafpipe.learning.ppo import Drawn
 
 log = logging.getLogger(__name__)
@@ -86,28 +88,26 @@ def kept_score(history: list[dict[str, float]]) -> dict[str, object]:
     return {"name": name, "value": float(value), "direction": "maximize"}
 
 
-def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
-    from stafpipe.launch import config_hash
-    from stafpipe.learning.checkpoint import save_policy
-    from stafpipe.learning.ppo import STATE_FILE, best_iteration, train_ppo
-    from stafpipe.plots.training import ppo_figure
+def _training_pool(cfg: DictConfig, tc: TrainPPOConfig) -> list[Scenario]:
+    """The scenarios training draws from (`train_ppo.scenarios`, team sizes applied)."""
+    pool = scenario_pool(tc.scenarios, cfg, tc.formations, "train_ppo.scenarios")
+    return curriculum(pool, "n", tc.team_sizes, "train_ppo.scenarios") if tc.team_sizes else pool
+
+
+def _train(
+    cfg: DictConfig, out_dir: Path, digest: str, resume_from: Path | None, workers: Workers
+) -> tuple[PolicyNet, list[dict[str, float]], list[str]]:
+    """Train in this process as one of `workers`: (network, history, validation map names). The main worker writes
+    the learning curves and TensorBoard events every iteration."""
+    from stafpipe.learning.ppo import train_ppo
     from stafpipe.sensing import SensingConfig
-    from stafpipe.tensorboard_log import TB_DIR, ScalarLog
-    from stafpipe.training_record import commit
+    from stafpipe.tensorboard_log import ScalarLog
     from stafpipe.world import WorldConfig
 
     tc = section(cfg.train_ppo, TrainPPOConfig)
-    tc.check()
     world_cfg = section(cfg.world, WorldConfig)
     sensing = section(cfg.sensing, SensingConfig)
-    pool = scenario_pool(tc.scenarios, cfg, tc.formations, "train_ppo.scenarios")
-    if tc.team_sizes:
-        pool = curriculum(pool, "n", tc.team_sizes, "train_ppo.scenarios")
-    test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
-    if test_maps:
-        log.warning(
-            "train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps
-        )
+    pool = _training_pool(cfg, tc)
     drawn = [(s, *path_and_width(s)) for s in progress(pool, desc="train-ppo: maps", unit="map")]
     groups = by_team(drawn)  # one group per iteration
     keys = sorted(groups)
@@ -119,19 +119,13 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         same = groups[keys[int(rng.integers(len(keys)))] if len(keys) > 1 else keys[0]]
         return [same[int(k)] for k in rng.integers(len(same), size=count)]
 
-    plain = copy.deepcopy(cfg)
-    plain.train_ppo.resume = False  # the same run, resumed or not, has one hash
-    digest = config_hash(plain)
-    resume_from = resume_state(out_dir, digest) if tc.resume else None
-    if tc.resume and resume_from is None:
-        log.warning("train_ppo.resume: no saved state of this config; starting afresh")
     curves = out_dir / "learning_curves"
-
-    board = ScalarLog(out_dir, "iteration")
+    board = ScalarLog(out_dir, "iteration") if workers.main else None
 
     def on_iteration(history: list[dict[str, float]]) -> None:
         write_table(pd.DataFrame(history), curves)
-        board.sync(history)
+        if board is not None:
+            board.sync(history)
 
     try:
         policy, history = train_ppo(
@@ -146,10 +140,66 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
             resume_from,
             on_iteration,
             validation,
+            workers,
         )
-        board.sync(history)  # a resumed run with no iteration left to train writes the history it took over
+        if board is not None:
+            board.sync(history)  # a resumed run with no iteration left to train writes the history it took over
     finally:
-        board.close()
+        if board is not None:
+            board.close()
+    return policy, history, sorted({d[0].name for batch in validation for d in batch})
+
+
+def _worker(
+    resolved: DictConfig, out_dir: str, digest: str, resume_from: str | None
+) -> tuple[dict, list[dict[str, float]], list[str]] | None:
+    """One process of `train_ppo.workers` (started by `distributed.launch`): joins the others, trains its share,
+    and (the main worker) returns the weights, the history and the validation maps."""
+    logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(name)s][%(levelname)s] - %(message)s")
+    workers = joined()
+    try:
+        if not workers.main:
+            logging.getLogger("stafpipe").setLevel(logging.WARNING)  # one worker's log is the run's
+        resume = None if resume_from is None else Path(resume_from)
+        policy, history, validation_maps = _train(resolved, Path(out_dir), digest, resume, workers)
+        return (policy.state_dict(), history, validation_maps) if workers.main else None
+    finally:
+        leave()
+
+
+def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
+    from stafpipe.launch import config_hash
+    from stafpipe.learning.checkpoint import save_policy
+    from stafpipe.learning.ppo import STATE_FILE, best_iteration
+    from stafpipe.learning.registry import adapter_class
+    from stafpipe.plots.training import ppo_figure
+    from stafpipe.tensorboard_log import TB_DIR
+    from stafpipe.training_record import commit
+
+    tc = section(cfg.train_ppo, TrainPPOConfig)
+    tc.check()
+    plain = copy.deepcopy(cfg)
+    plain.train_ppo.resume = False  # the same run, resumed or not, has one hash
+    digest = config_hash(plain)
+    resume_from = resume_state(out_dir, digest) if tc.resume else None
+    if tc.resume and resume_from is None:
+        log.warning("train_ppo.resume: no saved state of this config; starting afresh")
+    pool = _training_pool(cfg, tc)
+    test_maps = sorted({s.name for s in pool} & BUILT_IN_TEST_MAPS)
+    if test_maps:
+        log.warning(
+            "train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps
+        )
+    if tc.workers == 1:
+        policy, history, validation_maps = _train(cfg, out_dir, digest, resume_from, ALONE)
+    else:
+        resolved = copy.deepcopy(cfg)
+        OmegaConf.resolve(resolved)  # the workers have no Hydra to resolve with; the typed sections travel pickled
+        where = None if resume_from is None else str(resume_from)
+        weights, history, validation_maps = launch(tc.workers, _worker, resolved, str(out_dir), digest, where)
+        policy = adapter_class(tc.method).network(tc.policy)
+        policy.load_state_dict(weights)
+    curves = out_dir / "learning_curves"
     made_by = {
         "train_ppo": OmegaConf.to_container(cfg.train_ppo, resolve=True),
         "seed": int(cfg.seed),
@@ -161,7 +211,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         "commit": commit(),
         "iterations": len(history),
         "final": history[-1] if history else {},
-        "validation_maps": sorted({d[0].name for batch in validation for d in batch}),
+        "validation_maps": validation_maps,
         "selected_iteration": len(history) if (chosen := best_iteration(history)) is None else chosen,
     }
     outputs = [save_policy(out_dir / "policy.pt", tc.method, policy, made_by), out_dir / STATE_FILE]
