@@ -259,9 +259,9 @@ class TrainPPOConfig:
         require(0 < self.clip < 1, f"{key}.clip", "must be in (0, 1)", self.clip)
         require(self.lr > 0, f"{key}.lr", "must be > 0", self.lr)
         require(
-            self.worlds * self.episode_steps >= self.minibatches,
+            self.worlds // max(1, self.workers) * self.episode_steps >= self.minibatches,
             f"{key}.minibatches",
-            "must not exceed worlds x episode_steps",
+            "must not exceed worlds / workers x episode_steps (a worker's samples)",
             self.minibatches,
         )
         require(self.policy.guide in ("goal", "path"), f"{key}.policy.guide", "must be goal or path", self.policy.guide)

@@ -21,6 +21,8 @@ from typing import Any
 import torch
 import torch.distributed as dist
 
+from stafpipe.errors import StafpipeError
+
 RANK_SEED_STRIDE = 1_000_003
 """A worker's torch seeds (action noise, minibatch order) are `seed + rank x this`; rank 0 keeps the run's seed, so
 one worker draws exactly what a run without workers draws."""
@@ -52,19 +54,23 @@ class Workers:
 
     def average_gradients(self, params: Iterable[torch.nn.Parameter]) -> None:
         """Every parameter's gradient replaced by its mean over the workers (one all-reduce of a flat buffer, on the
-        CPU: gloo's); a parameter without a gradient counts as a zero one."""
+        CPU: gloo's), a missing gradient counted as zeros; a parameter no worker has a gradient for keeps none, as
+        in one process (the optimiser then leaves it alone)."""
         if self.size == 1:
             return
         params = list(params)
         grads = [p.grad if p.grad is not None else torch.zeros_like(p) for p in params]
-        flat = torch.cat([g.detach().reshape(-1).cpu() for g in grads])
+        has = torch.tensor([float(p.grad is not None) for p in params])
+        flat = torch.cat([*(g.detach().reshape(-1).cpu() for g in grads), has])
         dist.all_reduce(flat)
         flat /= self.size
         start = 0
-        for p, g in zip(params, grads, strict=True):
+        for p, g, anyone in zip(params, grads, flat[-len(params) :].tolist(), strict=True):
             part = flat[start : start + g.numel()].view_as(g).to(g.device)
             start += g.numel()
-            if p.grad is None:
+            if anyone == 0:
+                p.grad = None
+            elif p.grad is None:
                 p.grad = part
             else:
                 p.grad.copy_(part)
@@ -81,8 +87,12 @@ class Workers:
         """Per-worker means over equal shares, averaged over the workers (keys in the same order everywhere)."""
         if self.size == 1:
             return stats
-        keys = sorted(stats)
-        return dict(zip(keys, (v / self.size for v in self.total([stats[k] for k in keys])), strict=True))
+        keys = list(stats)
+        every = self.gather(keys)
+        names = every[0]  # the main worker's order, the same list everywhere
+        if any(sorted(k) != sorted(names) for k in every):
+            raise RuntimeError(f"train_ppo.workers: the workers' statistics differ in their names ({keys})")
+        return dict(zip(names, (v / self.size for v in self.total([stats[k] for k in names])), strict=True))
 
     def from_main(self, module: torch.nn.Module, extra: Any = None) -> Any:
         """`module`'s weights and the picklable `extra` made equal to the main worker's; returns its `extra`."""
@@ -126,7 +136,11 @@ def leave() -> None:
 
 def launch(count: int, entry: Callable[..., Any], *args: Any) -> Any:
     """Run `entry(*args)` in `count` local worker processes through torch.distributed's elastic launcher (what
-    `torchrun --standalone --nproc-per-node=count` does) and return rank 0's result; a worker's failure raises."""
+    `torchrun --standalone --nproc-per-node=count` does) and return rank 0's result. A worker's StafpipeError comes
+    back as one (with `entry` decorated by torch's `record`, which passes its message), any other failure as a
+    RuntimeError naming the worker, Ctrl-C as KeyboardInterrupt."""
+    from torch.distributed.elastic.multiprocessing.api import SignalException
+    from torch.distributed.elastic.multiprocessing.errors import ChildFailedError
     from torch.distributed.launcher.api import LaunchConfig, elastic_launch
 
     config = LaunchConfig(
@@ -139,7 +153,25 @@ def launch(count: int, entry: Callable[..., Any], *args: Any) -> Any:
         max_restarts=0,  # a failed worker fails the run: a restart would train from a state the others left
         start_method="spawn",
     )
-    return elastic_launch(config, entry)(*args)[0]
+    try:
+        return elastic_launch(config, entry)(*args)[0]
+    except SignalException:
+        raise KeyboardInterrupt from None
+    except ChildFailedError as failed:
+        rank, failure = failed.get_first_failure()
+        said = failure.message.get("message", "") if isinstance(failure.message, dict) else str(failure.message)
+        kind, _, text = said.partition(": ")
+        if kind in _names(StafpipeError):
+            raise StafpipeError(text) from None
+        raise RuntimeError(
+            f"train_ppo.workers: worker {rank} failed ({said or f'exit code {failure.exitcode}'})"
+        ) from None
+
+
+def _names(kind: type) -> set[str]:
+    """The names of `kind` and of its subclasses."""
+    subclasses: list[type] = kind.__subclasses__()
+    return {kind.__name__}.union(*(_names(sub) for sub in subclasses))
 
 
 ALONE = Workers()

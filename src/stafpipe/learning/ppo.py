@@ -109,7 +109,8 @@ def update(
                 stats.append(torch.stack([pg_loss, v_loss, entropy, kl, clipfrac]).detach())
     rows = torch.stack(stats).cpu().tolist()  # one read; summed in order, as Python floats, minibatch by minibatch
     names = ("losses/policy", "losses/value", "losses/entropy", "losses/approx_kl", "losses/clipfrac")
-    if not all(math.isfinite(v) for row in rows for v in row):
+    diverged = not all(math.isfinite(v) for row in rows for v in row)
+    if workers.total([float(diverged)], "max")[0]:  # every worker stops, not one while the others wait for it
         raise StafpipeError(
             "train_ppo: the PPO update's losses are not finite (NaN or inf): training diverged; a lower "
             "train_ppo.lr or train_ppo.max_grad_norm may help"

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pandas as pd
 from omegaconf import DictConfig, OmegaConf
+from torch.distributed.elastic.multiprocessing.errors import record
 
 from stafpipe.errors import StafpipeError
 from stafpipe.io import OBJECTIVE, save_figure, write_json, write_table
@@ -30,6 +31,8 @@ if TYPE_CHECKING:
     from stafpipe.learning.ppo import Drawn
 
 log = logging.getLogger(__name__)
+LOG_FORMAT = "[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"
+"""The workers' log lines, as Hydra writes the run's."""
 
 
 def resume_state(out_dir: Path, digest: str) -> Path | None:
@@ -95,10 +98,10 @@ def _training_pool(cfg: DictConfig, tc: TrainPPOConfig) -> list[Scenario]:
 
 
 def _train(
-    cfg: DictConfig, out_dir: Path, digest: str, resume_from: Path | None, workers: Workers
+    cfg: DictConfig, out_dir: Path, digest: str, resume_from: Path | None, workers: Workers, pool: list[Scenario]
 ) -> tuple[PolicyNet, list[dict[str, float]], list[str]]:
-    """Train in this process as one of `workers`: (network, history, validation map names). The main worker writes
-    the learning curves and TensorBoard events every iteration."""
+    """Train in this process as one of `workers` on the training scenarios `pool`: (network, history, validation
+    map names). The main worker writes the learning curves and TensorBoard events every iteration."""
     from stafpipe.learning.ppo import train_ppo
     from stafpipe.sensing import SensingConfig
     from stafpipe.tensorboard_log import ScalarLog
@@ -107,7 +110,6 @@ def _train(
     tc = section(cfg.train_ppo, TrainPPOConfig)
     world_cfg = section(cfg.world, WorldConfig)
     sensing = section(cfg.sensing, SensingConfig)
-    pool = _training_pool(cfg, tc)
     drawn = [(s, *path_and_width(s)) for s in progress(pool, desc="train-ppo: maps", unit="map")]
     groups = by_team(drawn)  # one group per iteration
     keys = sorted(groups)
@@ -150,18 +152,25 @@ def _train(
     return policy, history, sorted({d[0].name for batch in validation for d in batch})
 
 
+@record  # a failure's message reaches the launching process (distributed.launch)
 def _worker(
     resolved: DictConfig, out_dir: str, digest: str, resume_from: str | None
 ) -> tuple[dict, list[dict[str, float]], list[str]] | None:
     """One process of `train_ppo.workers` (started by `distributed.launch`): joins the others, trains its share,
-    and (the main worker) returns the weights, the history and the validation maps."""
-    logging.basicConfig(level=logging.INFO, format="[%(asctime)s][%(name)s][%(levelname)s] - %(message)s")
+    and (the main worker) returns the weights, the history and the validation maps. The main worker logs to the
+    console and to the run's log file, the others their errors only."""
+    logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
     workers = joined()
     try:
+        if workers.main and (Path(out_dir) / "train-ppo.log").is_file():
+            to_file = logging.FileHandler(Path(out_dir) / "train-ppo.log")
+            to_file.setFormatter(logging.Formatter(LOG_FORMAT))
+            logging.getLogger().addHandler(to_file)
         if not workers.main:
-            logging.getLogger("stafpipe").setLevel(logging.WARNING)  # one worker's log is the run's
+            logging.getLogger("stafpipe").setLevel(logging.ERROR)
         resume = None if resume_from is None else Path(resume_from)
-        policy, history, validation_maps = _train(resolved, Path(out_dir), digest, resume, workers)
+        pool = _training_pool(resolved, section(resolved.train_ppo, TrainPPOConfig))
+        policy, history, validation_maps = _train(resolved, Path(out_dir), digest, resume, workers, pool)
         return (policy.state_dict(), history, validation_maps) if workers.main else None
     finally:
         leave()
@@ -191,7 +200,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
             "train_ppo.scenarios include the built-in test maps %s: results on them are not held out", test_maps
         )
     if tc.workers == 1:
-        policy, history, validation_maps = _train(cfg, out_dir, digest, resume_from, ALONE)
+        policy, history, validation_maps = _train(cfg, out_dir, digest, resume_from, ALONE, pool)
     else:
         resolved = copy.deepcopy(cfg)
         OmegaConf.resolve(resolved)  # the workers have no Hydra to resolve with; the typed sections travel pickled
