@@ -22,6 +22,15 @@ from scipy.sparse.csgraph import dijkstra
 from stafpipe.distances import capsule_parts, closest_points, distance_to, inside_is_zero
 from stafpipe.scenario import Scenario
 
+SEARCH_BOUNDS = (lambda straight: 1.5 * straight + 2.0, lambda straight: 6.0 * straight + 8.0)
+"""Path costs (m) a shortest-path search stops at, tried in turn before a search of the whole grid, as functions of
+the straight distance between the two points: a search expands every cell cheaper than its bound, and most ways
+through a map are less than 1.5 times as long as the straight line, so most searches stop long before the grid's
+far end (a 30 x 12 m world is 576,000 cells; a full search takes about 0.8 s). The distances within the bound are
+the whole search's; where two ways tie to the last bit the bounded search may take the other one (its heap holds fewer
+cells), of the same length. `benchmarks/path_search.py`: on 156 legs of the 15 built-in and 40 generated maps every
+path came out the same cell for cell; the built-in maps' routes are searched 2.35x faster, a generated map's one
+leg across the world no faster (docs/decisions.md, "Bounded path searches")."""
 CHUNK_BYTES = 256 * 2**20
 """Bytes the clearance grid's temporaries may take at once (four arrays of blocks x cells x candidates x 2 floats):
 a map of 10,000 small obstacles asked for 3.35 GiB in one piece."""
@@ -198,21 +207,31 @@ class Geometry:
 
     def _shortest_path(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
         s, g = self._node(start), self._node(goal)
-        dist, pred = dijkstra(self._graph(clearance), directed=False, indices=s, return_predecessors=True)
+        dist, pred, _ = self._search(clearance, s, g, math.dist(start, goal))
         return self._pulled(self._trace(dist, pred, g, s, (start, goal, clearance))[::-1], start, goal, clearance)
+
+    def _search(self, clearance: float, root: int, target: int, straight: float, after: float = 0.0) -> tuple:
+        """(dist, pred, bound) of a Dijkstra search from `root` over the free cells at `clearance`, stopped at the
+        first of SEARCH_BOUNDS above `after` that reaches `target`, else over the whole grid (inf)."""
+        graph = self._graph(clearance)
+        for bound in [b(straight) for b in SEARCH_BOUNDS if b(straight) > after] + [math.inf]:
+            dist, pred = dijkstra(graph, directed=False, indices=root, return_predecessors=True, limit=bound)
+            if np.isfinite(dist[target]) or math.isinf(bound):
+                return dist, pred, bound
+        raise AssertionError("unreachable: the last bound is infinite")
 
     def path_to(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
         """As `shortest_path`, read from one Dijkstra tree rooted at the goal, kept per (goal, clearance): for many
         starts and one goal (L&F's leader from each episode's own perturbed start), one search instead of one per
         start. The same length as `shortest_path`'s; where two ways tie it may take the other."""
-        g = self._node(goal)
-        dist, pred = self.remember(
-            ("tree", g, float(clearance)),
-            lambda: dijkstra(self._graph(clearance), directed=False, indices=g, return_predecessors=True),
-        )
-        return self._pulled(
-            self._trace(dist, pred, self._node(start), g, (start, goal, clearance)), start, goal, clearance
-        )
+        g, s = self._node(goal), self._node(start)
+        key = ("tree", g, float(clearance))
+        tree = self._memo.get(key)
+        if tree is None or not (np.isfinite(tree[0][s]) or math.isinf(tree[2])):  # a start beyond the tree's bound
+            done = 0.0 if tree is None else tree[2]
+            tree = self._memo[key] = self._search(clearance, g, s, math.dist(start, goal), done)
+        dist, pred, _ = tree
+        return self._pulled(self._trace(dist, pred, s, g, (start, goal, clearance)), start, goal, clearance)
 
     def _node(self, point: tuple[float, float]) -> int:
         i, j = self._cell(point)
