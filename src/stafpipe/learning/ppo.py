@@ -275,9 +275,9 @@ def train_ppo(
     With `validation` (batches of held-out worlds), the returned network is the one of `best_iteration`.
 
     With `workers` (DD-PPO, learning/distributed.py) every worker draws the same worlds and steps its share of
-    them, the update averages their gradients, and every statistic is averaged over them, so every worker ends with
-    the same weights and the same history; the main worker alone runs the warm start, writes the state and calls
-    `on_iteration`."""
+    them, the update averages their gradients, and the curves' rates and losses are averaged over them (robot-steps
+    summed, seconds the slowest worker's), so every worker ends with the same weights and the same history; the main
+    worker alone runs the warm start, writes the state and calls `on_iteration`."""
     torch.set_num_threads(tc.threads)
     device = training_device(tc.device, "train_ppo.device")
     torch.manual_seed(seed)
