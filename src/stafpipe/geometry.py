@@ -22,15 +22,15 @@ from scipy.sparse.csgraph import dijkstra
 from stafpipe.distances import capsule_parts, closest_points, distance_to, inside_is_zero
 from stafpipe.scenario import Scenario
 
-SEARCH_BOUNDS = (lambda straight: 1.5 * straight + 2.0, lambda straight: 6.0 * straight + 8.0)
-"""Path costs (m) a shortest-path search stops at, tried in turn before a search of the whole grid, as functions of
-the straight distance between the two points: a search expands every cell cheaper than its bound, and most ways
-through a map are less than 1.5 times as long as the straight line, so most searches stop long before the grid's
-far end (a 30 x 12 m world is 576,000 cells; a full search takes about 0.8 s). The distances within the bound are
-the whole search's; where two ways tie to the last bit the bounded search may take the other one (its heap holds fewer
-cells), of the same length. `benchmarks/path_search.py`: on 156 legs of the 15 built-in and 40 generated maps every
-path came out the same cell for cell; the built-in maps' routes are searched 2.35x faster, a generated map's one
-leg across the world no faster (docs/decisions.md, "Bounded path searches")."""
+SEARCH_BOUNDS = ((1.5, 2.0), (6.0, 8.0))
+"""Path costs (m) a shortest-path search stops at, tried in turn before a search of the whole grid: (factor, margin) of
+factor x the straight distance between the two points + margin: a search expands every cell cheaper than its bound,
+and most ways through a map are less than 1.5 times as long as the straight line, so most searches stop long before
+the grid's far end (a 30 x 12 m world is 576,000 cells; a full search takes about 0.8 s). The distances within the
+bound are the whole search's; where two ways tie to the last bit the bounded search may take the other one (its heap
+holds fewer cells), of the same length. `benchmarks/path_search.py`: on 156 legs of the 15 built-in and 40 generated
+maps every path came out the same cell for cell; the built-in maps' routes are searched 2.35x faster, a generated
+map's one leg across the world no faster (docs/decisions.md, "Bounded path searches")."""
 CHUNK_BYTES = 256 * 2**20
 """Bytes the clearance grid's temporaries may take at once (four arrays of blocks x cells x candidates x 2 floats):
 a map of 10,000 small obstacles asked for 3.35 GiB in one piece."""
@@ -210,15 +210,18 @@ class Geometry:
         dist, pred, _ = self._search(clearance, s, g, math.dist(start, goal))
         return self._pulled(self._trace(dist, pred, g, s, (start, goal, clearance))[::-1], start, goal, clearance)
 
-    def _search(self, clearance: float, root: int, target: int, straight: float, after: float = 0.0) -> tuple:
+    def _search(
+        self, clearance: float, root: int, target: int, straight: float, after: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray, float]:
         """(dist, pred, bound) of a Dijkstra search from `root` over the free cells at `clearance`, stopped at the
         first of SEARCH_BOUNDS above `after` that reaches `target`, else over the whole grid (inf)."""
         graph = self._graph(clearance)
-        for bound in [b(straight) for b in SEARCH_BOUNDS if b(straight) > after] + [math.inf]:
+        bounds = [b for b in (factor * straight + margin for factor, margin in SEARCH_BOUNDS) if b > after]
+        for bound in [*bounds, math.inf]:
             dist, pred = dijkstra(graph, directed=False, indices=root, return_predecessors=True, limit=bound)
-            if np.isfinite(dist[target]) or math.isinf(bound):
-                return dist, pred, bound
-        raise AssertionError("unreachable: the last bound is infinite")
+            if np.isfinite(dist[target]):
+                break
+        return dist, pred, bound
 
     def path_to(self, start: tuple[float, float], goal: tuple[float, float], clearance: float) -> np.ndarray:
         """As `shortest_path`, read from one Dijkstra tree rooted at the goal, kept per (goal, clearance): for many

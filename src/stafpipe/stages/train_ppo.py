@@ -178,9 +178,8 @@ def _worker(
 
 def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
     from stafpipe.launch import config_hash
-    from stafpipe.learning.checkpoint import save_policy
+    from stafpipe.learning.checkpoint import build_policy, save_policy
     from stafpipe.learning.ppo import STATE_FILE, best_iteration
-    from stafpipe.learning.registry import adapter_class
     from stafpipe.plots.training import ppo_figure
     from stafpipe.tensorboard_log import TB_DIR
     from stafpipe.training_record import commit
@@ -206,7 +205,7 @@ def run_train_ppo(cfg: DictConfig, out_dir: Path) -> list[Path]:
         OmegaConf.resolve(resolved)  # the workers have no Hydra to resolve with; the typed sections travel pickled
         where = None if resume_from is None else str(resume_from)
         weights, history, validation_maps = launch(tc.workers, _worker, resolved, str(out_dir), digest, where)
-        policy = adapter_class(tc.method).network(tc.policy)
+        policy = build_policy(tc.method, tc.policy)
         policy.load_state_dict(weights)
     curves = out_dir / "learning_curves"
     made_by = {
