@@ -47,7 +47,11 @@ class SubteamingConfig:
     wall_margin: float = 0.1
     """m kept free to each side wall for a formation to count as fitting a passage."""
     lookahead: float = 2.0
-    """m: how far ahead on the route a goal out of sight is carried (`carried_goal`)."""
+    """m: how far ahead of a robot's own place on the route its goal is carried at most (`carried_goal`)."""
+    lead: float = 0.4
+    """m: how far ahead of its place in the moving formation a robot's carried goal lies (`carried_goal`). Below the
+    distance at which a step towards the goal reaches top speed, so that a robot ahead of its place slows and one
+    behind hurries: the formation closes its errors while it moves."""
     take_turns: bool = True
     """Subteams enter the first passage one after another (rule 5); false: all at once."""
 
@@ -56,6 +60,7 @@ class SubteamingConfig:
         require(self.min_spacing > 0, f"{key}.min_spacing", "must be > 0", self.min_spacing)
         require(self.wall_margin >= 0, f"{key}.wall_margin", "must be >= 0", self.wall_margin)
         require(self.lookahead > 0, f"{key}.lookahead", "must be > 0", self.lookahead)
+        require(0 < self.lead <= self.lookahead, f"{key}.lead", "must be > 0 and <= lookahead", self.lead)
 
 
 def subteam_count(cfg: SubteamingConfig, kind: str, n: int, eta: float, radius: float, angle_deg: float) -> int:
@@ -187,8 +192,10 @@ class SubteamPlan:
         target = self.hold.copy()
         self.centre = self.hold.copy()  # each robot's (sub)team's carried centre, for the teacher (`free_aim`)
         for members, goal, centre, offset, along in self._moving:
+            mine = self.progress[members]
+            middle = float(self.frame.progress(pos[members].mean(axis=0)[None], near=mine.mean()[None])[0])
             target[members], self.centre[members] = carry(
-                self.progress[members], self.frame, goal, centre, offset, along, self.cfg.lookahead, self.heading
+                mine, middle, self.frame, goal, centre, offset, along, self.cfg, self.heading
             )
         return target
 
@@ -198,18 +205,24 @@ class SubteamPlan:
 
 
 def carried_goal(
-    progress: np.ndarray, frame: PathFrame, goal: np.ndarray, lookahead: float, heading: float
+    progress: np.ndarray, middle: float, frame: PathFrame, goal: np.ndarray, cfg: SubteamingConfig, heading: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(k, 2) targets of one (sub)team whose robots are `progress` (k,) along the route `frame`, with goal slots
-    `goal` (k, 2) of a formation facing `heading` (rad), and (k, 2) the route point each target is set round: the
-    slots themselves once the (sub)team's mean progress is within `lookahead` of the route's end; before that, each
-    robot's slot offset in the formation, turned to the route's direction, round the point `lookahead` ahead on the
-    route of the (sub)team's mean progress, or of the robot's own where it lags behind its place in the formation
-    (its progress less its slot's offset along the route, below the mean). For robots in formation, the differences
-    between teammates' targets are those of their goal slots (STAF's s_j - s_i compares goals); a robot left behind a
-    wall aims along the route from where it is, not at a point beyond the wall; and no goal lies round a corner the
-    network cannot see round."""
-    return carry(progress, frame, goal, *slot_offsets(goal, heading), lookahead, heading)
+    """(k, 2) targets of one (sub)team whose robots are `progress` (k,) along the route `frame` and whose centroid
+    is `middle` along it, with goal slots `goal` (k, 2) of a formation facing `heading` (rad), and (k, 2) the route
+    point each target is set round: the slots themselves once `middle` is within `cfg.lookahead` of the route's end;
+    before that, each robot's slot offset in the formation, turned to the route's direction, round the route point
+    `cfg.lead` ahead of `middle`, but never more than `cfg.lookahead` ahead of the robot's own place (its progress
+    less its slot's offset along the route).
+
+    Why: the differences between teammates' targets are those of their goal slots (STAF's s_j - s_i compares goals);
+    a robot ahead of its place sees its target close (or behind it) and slows, one behind sees it further and
+    hurries, so the moving formation corrects its shape (a goal carried far ahead of every robot puts every robot at
+    top speed and freezes whatever shape the team had); a robot left behind a wall aims along the route from where it
+    is, not at a point beyond the wall; and no goal lies round a corner the network cannot see round. The centroid's
+    progress, not the mean of the robots' own: where the route bends, the robots of a wide formation across it project
+    onto it unevenly, and a formation standing still across the route can have a mean progress `cfg.lead` behind
+    where it stands (a line of nine stood short of its goal)."""
+    return carry(progress, middle, frame, goal, *slot_offsets(goal, heading), cfg, heading)
 
 
 def slot_offsets(goal: np.ndarray, heading: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -222,19 +235,19 @@ def slot_offsets(goal: np.ndarray, heading: float) -> tuple[np.ndarray, np.ndarr
 
 def carry(
     progress: np.ndarray,
+    middle: float,
     frame: PathFrame,
     goal: np.ndarray,
     goal_centre: np.ndarray,
     offset: np.ndarray,
     along: np.ndarray,
-    lookahead: float,
+    cfg: SubteamingConfig,
     heading: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """`carried_goal` with the slots' `slot_offsets` computed beforehand."""
-    mean = float(progress.mean())
-    if frame.length - mean <= lookahead:
+    if frame.length - middle <= cfg.lookahead:
         return goal, np.broadcast_to(goal_centre, goal.shape)
-    point, direction = frame.at(np.minimum(progress - along, mean) + lookahead)
+    point, direction = frame.at(np.minimum(progress - along + cfg.lookahead, middle + cfg.lead))
     turn = direction - heading
     c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
     turned = np.concatenate([c * offset[:, :1] - s * offset[:, 1:], s * offset[:, :1] + c * offset[:, 1:]], axis=1)
