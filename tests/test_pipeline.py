@@ -50,6 +50,34 @@ def test_step_reference_and_bad_files(workdir) -> None:
         run_pipeline("does-not-exist")
 
 
+def test_a_step_sweeps_its_axes_and_a_pattern_names_every_matching_step(workdir) -> None:
+    from pathlib import Path
+
+    from stafpipe.pipeline import load_pipeline, plan_pipeline
+
+    path = _write(
+        workdir,
+        "steps:\n"
+        "  - name: 'gen-{size}-{seed}'\n"
+        "    stage: generate\n"
+        "    overrides: [experiment=smoke, 'seed={seed}']\n"
+        "    over:\n"
+        "      size: {small: data.n_max=6, big: [data.n_max=8]}\n"
+        "      seed: [1, 2]\n"
+        "  - {name: last, stage: generate, overrides: [experiment=smoke, '+x=[{steps.gen-small-*.dir}]']}\n",
+    )
+    steps = load_pipeline(Path(path)).steps
+    assert [s.name for s in steps] == ["gen-small-1", "gen-small-2", "gen-big-1", "gen-big-2", "last"]
+    assert steps[2].overrides == ["experiment=smoke", "seed=1", "data.n_max=8"]
+    plan = plan_pipeline(load_pipeline(Path(path)), workdir / "outputs", [])
+    assert len({p[3] for p in plan[:4]}) == 4  # four configs, four hashes
+    assert plan[-1][1][-1] == f"+x=[{plan[0][2]},{plan[1][2]}]"
+    with pytest.raises(StafpipeError, match=r"must hold \{seed\}"):
+        load_pipeline(Path(_write(workdir, "steps:\n  - {name: g, stage: generate, over: {seed: [1, 2]}}\n")))
+    with pytest.raises(StafpipeError, match=r"over.seed: must be a non-empty list"):
+        load_pipeline(Path(_write(workdir, "steps:\n  - {name: 'g{seed}', stage: generate, over: {seed: 3}}\n")))
+
+
 @pytest.mark.slow  # over 5 s on 2 cores
 def test_step_reruns_when_a_file_it_reads_changes(workdir, capsys) -> None:
     # The config hash is the same, but the map the step reads was edited: the old result must not be reused.

@@ -5,18 +5,29 @@ resolved config. A step whose directory already holds a completion marker with t
 forced). An override may name an earlier step's directory as `{steps.<name>.dir}`, and every earlier step's directory
 as `{steps.*.dir}` (a comma-separated list, for a report over all of them).
 
+A reference may be a pattern: `{steps.full-*.dir}` is every earlier step whose name matches (fnmatch), in order.
+
 A step may be `{include: <pipeline>}`: that pipeline's steps join this one, named `<pipeline>.<step>`, and keep their
 own run directories (`<out_root>/pipelines/<pipeline>/...`), so a study run on its own is not run again by a pipeline
 that includes it.
+
+A step may sweep (`over`): a mapping from an axis name to its values, each value a label with the overrides it adds
+(a mapping label -> override or list of overrides) or a plain list of labels that add none. The step stands for one
+step per combination, the first axis outermost; `{axis}` in its name and overrides is replaced by the label, and the
+name must hold every axis so that the steps' names differ. A study's YAML says what varies instead of copying a step
+per cell.
 """
 
 from __future__ import annotations
 
+import fnmatch
+import itertools
 import json
 import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
@@ -26,8 +37,8 @@ from stafpipe.launch import MARKER, STAGE_FUNCTIONS, config_hash, inputs_hash, l
 from stafpipe.paths import pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
-_STEP_REF = re.compile(r"\{steps\.([A-Za-z0-9_.-]+)\.dir\}")
-_ALL_REF = "{steps.*.dir}"
+_STEP_REF = re.compile(r"\{steps\.([][A-Za-z0-9_.*?-]+)\.dir\}")
+_AXIS = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
 
 @dataclass
@@ -86,9 +97,9 @@ def load_pipeline(path: Path, _including: tuple[str, ...] = ()) -> Pipeline:
         if isinstance(item, dict) and set(item) == {"include"}:
             steps += _included(str(item["include"]), where, (*_including, name_of_pipe))
             continue
-        if not isinstance(item, dict) or set(item) - {"name", "stage", "overrides"}:
+        if not isinstance(item, dict) or set(item) - {"name", "stage", "overrides", "over"}:
             raise StafpipeError(
-                f"{where}: a step has 'stage', optional 'name' and 'overrides' (or is {{include: PIPELINE}}), "
+                f"{where}: a step has 'stage', optional 'name', 'overrides' and 'over' (or is {{include: PIPELINE}}), "
                 f"got {item!r}"
             )
         if item.get("stage") not in STAGES:
@@ -96,14 +107,61 @@ def load_pipeline(path: Path, _including: tuple[str, ...] = ()) -> Pipeline:
         overrides = item.get("overrides", [])
         if not isinstance(overrides, list) or not all(isinstance(o, str | int | float) for o in overrides):
             raise StafpipeError(f"{where}.overrides: must be a list of strings")
-        name = str(item.get("name", item["stage"]))
-        if not re.fullmatch(r"[A-Za-z0-9_-]+", name):
-            raise StafpipeError(f"{where}.name: '{name}' may hold only letters, digits, '_' and '-'")
-        steps.append(PipelineStep(name, item["stage"], [str(o) for o in overrides]))
+        for name, swept in _swept(str(item.get("name", item["stage"])), [str(o) for o in overrides], item, where):
+            if not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+                raise StafpipeError(f"{where}.name: '{name}' may hold only letters, digits, '_' and '-'")
+            steps.append(PipelineStep(name, item["stage"], swept))
     for i, step in enumerate(steps):
         if any(s.name == step.name for s in steps[:i]):
             raise StafpipeError(f"{path}: step name '{step.name}' is used twice; give the steps distinct names")
     return Pipeline(name_of_pipe, str(raw.get("description", "")), steps)
+
+
+def _axes(over: Any, where: str) -> dict[str, dict[str, list[str]]]:
+    """A step's `over`, checked: axis -> label -> the overrides that label adds."""
+    if not isinstance(over, dict) or not over:
+        raise StafpipeError(f"{where}.over: must be a mapping from an axis name to its values, got {over!r}")
+    axes: dict[str, dict[str, list[str]]] = {}
+    for axis, values in over.items():
+        key = f"{where}.over.{axis}"
+        if not str(axis).isidentifier():
+            raise StafpipeError(f"{key}: an axis name is a Python identifier")
+        if isinstance(values, list) and values and all(isinstance(v, str | int | float) for v in values):
+            axes[axis] = {str(v): [] for v in values}
+        elif isinstance(values, dict) and values:
+            axes[axis] = {}
+            for label, adds in values.items():
+                adds = [adds] if isinstance(adds, str | int | float) else adds
+                if adds is None:
+                    adds = []
+                if not isinstance(adds, list) or not all(isinstance(o, str | int | float) for o in adds):
+                    raise StafpipeError(f"{key}.{label}: must be an override or a list of overrides, got {adds!r}")
+                axes[axis][str(label)] = [str(o) for o in adds]
+        else:
+            raise StafpipeError(f"{key}: must be a non-empty list of labels or mapping label -> overrides")
+        if len(axes[axis]) != len(values):
+            raise StafpipeError(f"{key}: labels must differ")
+    return axes
+
+
+def _swept(name: str, overrides: list[str], item: dict, where: str) -> list[tuple[str, list[str]]]:
+    """(name, overrides) of each step a pipeline step stands for: itself, or one per combination of its `over`."""
+    if "over" not in item:
+        return [(name, overrides)]
+    axes = _axes(item["over"], where)
+    missing = [a for a in axes if "{" + a + "}" not in name]
+    if missing:
+        raise StafpipeError(f"{where}.name: '{name}' must hold {{{missing[0]}}} so that each swept step has its own")
+    out = []
+    for combo in itertools.product(*(labels.items() for labels in axes.values())):
+        labels = {axis: label for axis, (label, _) in zip(axes, combo, strict=True)}
+
+        def fill(text: str, _labels: dict[str, str] = labels) -> str:
+            return _AXIS.sub(lambda m: _labels.get(m.group(1), m.group(0)), text)
+
+        added = [o for _, adds in combo for o in adds]
+        out.append((fill(name), [fill(o) for o in [*overrides, *added]]))
+    return out
 
 
 def _included(name: str, where: str, including: tuple[str, ...]) -> list[PipelineStep]:
@@ -195,12 +253,12 @@ def plan_pipeline(
             )
 
         def ref(match: re.Match[str], _step: PipelineStep = step) -> str:
-            if match.group(1) not in dirs:
+            found = [str(d) for n, d in dirs.items() if fnmatch.fnmatchcase(n, match.group(1))]
+            if not found:
                 raise StafpipeError(f"step '{_step.name}' refers to '{match.group(1)}', which is not an earlier step")
-            return str(dirs[match.group(1)])
+            return ",".join(found)
 
-        every = ",".join(str(d) for d in dirs.values())
-        overrides = [*extra, *(_STEP_REF.sub(ref, o.replace(_ALL_REF, every)) for o in step.overrides)]
+        overrides = [*extra, *(_STEP_REF.sub(ref, o) for o in step.overrides)]
         try:
             cfg = compose_config(step.stage, overrides)
         except Exception as exc:  # noqa: BLE001 - Hydra's composition errors, said in the user's terms
