@@ -18,7 +18,7 @@ import numpy as np
 import onnxruntime as ort
 import torch
 
-from stafpipe.export_onnx import NETWORKS, example_inputs, export, load_network
+from stafpipe.export_onnx import example_inputs, export, load_network, networks
 
 
 def timed(call, repeats: int) -> tuple[float, float]:
@@ -47,7 +47,7 @@ def main() -> None:
     print("| network | onnxruntime median ms | onnxruntime p99 ms | torch median ms | torch p99 ms |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
-        for network in NETWORKS:
+        for network in networks():
             path = export(network, "", Path(tmp) / f"{network}.onnx")
             module, _ = load_network(network)
             inputs = example_inputs(network, module, args.robots)

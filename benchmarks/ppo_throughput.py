@@ -38,8 +38,8 @@ from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
 from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.distributed import joined, launch, leave
 from stafpipe.learning.ppo import teams_of, update
-from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import collect, gae
+from stafpipe.registry import adapter_class
 from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig
 from stafpipe.torch_io import training_device

@@ -21,9 +21,9 @@ def recorded_features(method: str, n: int, steps: int = 30) -> list[tuple[np.nda
     from stafpipe.learning.checkpoint import load_policy
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import teams_of
-    from stafpipe.learning.registry import adapter_class
     from stafpipe.learning.rollout import commands
     from stafpipe.learning.teachers import teacher_actions
+    from stafpipe.registry import adapter_class
     from stafpipe.scenario import build_scenario
     from stafpipe.scenario_pool import load_named_scenario, path_and_width
     from stafpipe.sensing import SensingConfig

@@ -26,8 +26,8 @@ from stafpipe.geometry import Geometry
 from stafpipe.launch import launch
 from stafpipe.learning.checkpoint import load_policy
 from stafpipe.learning.config import ImitationConfig, PolicyConfig, TrainPPOConfig
-from stafpipe.learning.registry import ADAPTERS, adapter_class
 from stafpipe.learning.teachers import AVOID_GAIN, SLIDE_MARGIN, off_the_wall, teacher_actions
+from stafpipe.registry import adapter_class, learned_methods
 from stafpipe.scenario import TeamSpec, WorldBounds, build_scenario
 from stafpipe.scenario_pool import load_named_scenario
 from stafpipe.sensing import SensingConfig
@@ -38,7 +38,7 @@ def test_trainer_has_no_method_name_branches() -> None:
     """A new learned method is a network, an adapter and a config: the trainer never names one."""
     for module in (ppo, rollout, train_stage):
         assert not re.search(r"""["'](staf_planned|staf|dgnn)["']""", inspect.getsource(module)), module.__name__
-    assert set(ADAPTERS) == {"dgnn", "staf", "staf_planned"}
+    assert learned_methods() == ["dgnn", "staf", "staf_planned"]
 
 
 def _team(sc, worlds: Worlds, w: int = 0) -> TeamInfo:

@@ -10,9 +10,9 @@ import torch
 from stafpipe.learning.checkpoint import build_policy
 from stafpipe.learning.config import PolicyConfig, RewardConfig, TrainPPOConfig
 from stafpipe.learning.ppo import teams_of
-from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import collect
 from stafpipe.marl_env import BatchedTeamEnv
+from stafpipe.registry import adapter_class
 from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds

@@ -74,6 +74,17 @@ def test_a_step_sweeps_its_axes_and_a_pattern_names_every_matching_step(workdir)
     assert plan[-1][1][-1] == f"+x=[{plan[0][2]},{plan[1][2]}]"
     with pytest.raises(StafpipeError, match=r"must hold \{seed\}"):
         load_pipeline(Path(_write(workdir, "steps:\n  - {name: g, stage: generate, over: {seed: [1, 2]}}\n")))
+    text = "steps:\n  - {name: 'g{seed}', stage: generate, overrides: ['+a=${seed}'], over: {seed: [1]}}\n"
+    interpolated = load_pipeline(Path(_write(workdir, text)))
+    assert interpolated.steps[0].overrides == ["+a=${seed}"]  # a Hydra interpolation is not an axis
+    mixed = _write(
+        workdir,
+        "steps:\n  - {name: g-1, stage: generate, overrides: [experiment=smoke]}\n"
+        "  - {name: e-1, stage: eval, overrides: [experiment=smoke]}\n"
+        "  - {name: last, stage: plot, overrides: ['+x=[{steps.*-1.dir}]']}\n",
+    )
+    with pytest.raises(StafpipeError, match=r"matches steps of stages \['eval', 'generate'\]"):
+        plan_pipeline(load_pipeline(Path(mixed)), workdir / "outputs", [])
     with pytest.raises(StafpipeError, match=r"over.seed: must be a non-empty list"):
         load_pipeline(Path(_write(workdir, "steps:\n  - {name: 'g{seed}', stage: generate, over: {seed: 3}}\n")))
 

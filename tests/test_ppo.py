@@ -194,7 +194,7 @@ def test_init_from_starts_at_the_loaded_weights_and_refuses_other_settings(tmp_p
 def test_near_weight_reweights_the_samples_where_the_teacher_brakes(tmp_path) -> None:
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import _teacher_samples
-    from stafpipe.learning.registry import adapter_class
+    from stafpipe.registry import adapter_class
 
     tc = TrainPPOConfig(
         worlds=1,
@@ -245,8 +245,8 @@ def test_wall_copies_add_relabelled_near_wall_states() -> None:
     are those of a run without copies."""
     from stafpipe.learning.config import RewardConfig
     from stafpipe.learning.ppo import _teacher_samples
-    from stafpipe.learning.registry import adapter_class
     from stafpipe.learning.teachers import NEAR_WALL_GAP
+    from stafpipe.registry import adapter_class
 
     im = ImitationConfig(epochs=1, teacher="avoiding", noise=0.0, wall_copies=1.0)
     tc = TrainPPOConfig(method="staf_planned", worlds=1, episode_steps=20, policy=PolicyConfig(hidden=16), imitation=im)
@@ -360,8 +360,8 @@ def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error
     """The update reads its losses once, after its minibatches (not at each, which waits for a GPU); a NaN there
     stops training rather than saving NaN weights."""
     from stafpipe.learning.dgnn import DGNNPolicy
-    from stafpipe.learning.registry import adapter_class
     from stafpipe.learning.rollout import collect
+    from stafpipe.registry import adapter_class
     from stafpipe.world import Worlds
 
     torch.manual_seed(0)

@@ -23,10 +23,14 @@ from stafpipe.world import Worlds
 
 
 def _checkpoint(tmp_path, subteaming: dict | None = None) -> str:
-    """A small untrained STAF network saved as a policy checkpoint, its training record naming `subteaming`."""
+    """A small untrained STAF network saved as a policy checkpoint, its training record naming every `subteaming`
+    setting (the defaults, with `subteaming`'s values)."""
+    import dataclasses
+
     torch.manual_seed(0)
     policy = build_policy("staf", PolicyConfig(hidden=16))
-    made_by = {"train_ppo": {"subteaming": subteaming or {}}, "sensing": {"radius": 2.0}}
+    recorded = {**dataclasses.asdict(SubteamingConfig()), **(subteaming or {})}
+    made_by = {"train_ppo": {"subteaming": recorded}, "sensing": {"radius": 2.0}}
     return str(save_policy(tmp_path / "policy.pt", "staf", policy, made_by))
 
 

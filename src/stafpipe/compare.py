@@ -14,11 +14,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from stafpipe.controllers import METHODS
 from stafpipe.errors import StafpipeError
 from stafpipe.interrupt import INTERRUPTED
 from stafpipe.io import atomic_write
 from stafpipe.pipeline import Pipeline, PipelineStep, plan_pipeline, run_step
+from stafpipe.registry import load_plugins
 
 COMPARE_METHODS = ("staf", "staf_planned", "dgnn", "lf", "zhu", "cezayirli")
 """Every method of the three papers and ours; `straight` (a test fixture) only when asked for."""
@@ -57,9 +57,9 @@ def parse_methods(text: str) -> list[str]:
     if not text.strip():
         return list(COMPARE_METHODS)
     methods = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in methods if m not in METHODS]
+    unknown = [m for m in methods if m not in load_plugins()]
     if not methods or unknown:
-        raise StafpipeError(f"--methods: unknown method(s) {unknown or [text]}; methods: {sorted(METHODS)}")
+        raise StafpipeError(f"--methods: unknown method(s) {unknown or [text]}; methods: {sorted(load_plugins())}")
     return list(dict.fromkeys(methods))
 
 

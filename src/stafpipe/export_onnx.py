@@ -29,10 +29,17 @@ from stafpipe.errors import StafpipeError
 from stafpipe.highlevel.model import DeepGraphCut
 from stafpipe.io import atomic_write
 from stafpipe.learning.policy_net import PolicyNet
+from stafpipe.registry import adapter_class, learned_methods
 
 log = logging.getLogger(__name__)
-NETWORKS = ("staf", "staf_planned", "dgnn", "high")
 OPSET = 18
+HIGH = "high"
+"""The deep graph cut's name among the exportable networks (every learned method's policy, and this)."""
+
+
+def networks() -> list[str]:
+    """What `stafpipe export` can write: every learned method's policy (the registry's) and the deep graph cut."""
+    return [*learned_methods(), HIGH]
 
 
 class PolicyMean(nn.Module):
@@ -88,7 +95,7 @@ class DenseGraphCut(nn.Module):
 def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Tensor]:
     """Inputs of the right shapes and types for `network` (random values; a team of n robots)."""
     gen = torch.Generator().manual_seed(0)
-    if network == "high":
+    if network == HIGH:
         cfg = module.model.cfg
         adjacency = torch.rand(n, n, generator=gen) < 0.6
         adjacency = (adjacency | adjacency.T) & ~torch.eye(n, dtype=torch.bool)
@@ -97,9 +104,14 @@ def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Ten
             "adjacency": adjacency,
             "m": torch.tensor(min(2, cfg.m_max), dtype=torch.int64),
         }
+    from stafpipe.learning.dgnn import DGNNPolicy
     from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
+    from stafpipe.learning.staf_net import StafPolicy
 
-    staf = network in ("staf", "staf_planned")
+    net = adapter_class(network).network
+    if not issubclass(net, StafPolicy | DGNNPolicy):
+        raise StafpipeError(f"export: {network}'s network {net.__name__} has no example inputs (STAF's or DGNN's only)")
+    staf = issubclass(net, StafPolicy)
     own, edge = (STAF_OWN + int(module.policy.cfg.drive_input), STAF_EDGE) if staf else (OWN, EDGE)
     mask = (torch.rand(n, n, generator=gen) < 0.6) & ~torch.eye(n, dtype=torch.bool)
     return {
@@ -114,9 +126,9 @@ def load_network(network: str, checkpoint: str = "", ensemble: list[str] | None 
     policy comes with the runs `ensemble` names, by the eval controller's rule (`ensemble_paths`: unset, the shipped
     partners of the shipped checkpoint), so the file acts as `stafpipe eval` does; the record then lists every run's
     under `ensemble`."""
-    if network not in NETWORKS:
-        raise StafpipeError(f"export: network must be one of {list(NETWORKS)}, got {network!r}")
-    if network == "high":
+    if network not in networks():
+        raise StafpipeError(f"export: network must be one of {networks()}, got {network!r}")
+    if network == HIGH:
         from stafpipe.highlevel.checkpoint import load_checkpoint
 
         if ensemble:
@@ -151,7 +163,7 @@ def export(network: str, checkpoint: str, out: Path, ensemble: list[str] | None 
         )
         for name, value in inputs.items()
     }
-    output = "assignment" if network == "high" else "action"
+    output = "assignment" if network == HIGH else "action"
 
     def write(tmp: Path) -> None:
         quiet = logging.getLogger("torch.onnx")

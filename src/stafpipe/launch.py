@@ -331,7 +331,11 @@ def launch(stage: str, overrides: Sequence[str]) -> int:
 
     from stafpipe.config.compose_errors import explain
 
-    register_configs()
+    try:
+        register_configs()  # imports the method plugins: a broken one is a bad input, named
+    except StafpipeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     logging.raiseExceptions = False  # a log file on a full disk must not print tracebacks over the one-line error
     if any(o in ("-m", "--multirun") for o in overrides):
         problem = _config_problem(stage, overrides)  # every value of the sweep, before its first job runs

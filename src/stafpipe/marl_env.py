@@ -20,8 +20,8 @@ import numpy as np
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.features import flat_rows
 from stafpipe.learning.ppo import teams_of
-from stafpipe.learning.registry import ADAPTERS, adapter_class
 from stafpipe.learning.rollout import commands, episode_stats, step_reward, world_routes
+from stafpipe.registry import adapter_class, learned_methods
 from stafpipe.scenario import build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import WorldConfig, Worlds
@@ -48,8 +48,8 @@ class BatchedTeamEnv:
         from stafpipe.errors import StafpipeError
         from stafpipe.scenario_pool import load_named_scenario, path_and_width
 
-        if method not in ADAPTERS:
-            raise StafpipeError(f"method must be one of {sorted(ADAPTERS)}, got {method!r}")
+        if method not in learned_methods():
+            raise StafpipeError(f"method must be one of {learned_methods()}, got {method!r}")
         if worlds < 1 or episode_steps < 1:
             raise StafpipeError(f"worlds and episode_steps must be >= 1, got {worlds} and {episode_steps}")
         sc = load_named_scenario(scenario)

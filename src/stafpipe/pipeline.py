@@ -38,7 +38,7 @@ from stafpipe.paths import pipelines_dir
 
 STAGES = ("generate", "generate-maps", "train-high", "train-ppo", "eval", "ablate", "plot")
 _STEP_REF = re.compile(r"\{steps\.([][A-Za-z0-9_.*?-]+)\.dir\}")
-_AXIS = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
+_AXIS = re.compile(r"(?<!\$)\{([A-Za-z_][A-Za-z0-9_]*)\}")  # not a Hydra interpolation ${...}
 
 
 @dataclass
@@ -124,8 +124,8 @@ def _axes(over: Any, where: str) -> dict[str, dict[str, list[str]]]:
     axes: dict[str, dict[str, list[str]]] = {}
     for axis, values in over.items():
         key = f"{where}.over.{axis}"
-        if not str(axis).isidentifier():
-            raise StafpipeError(f"{key}: an axis name is a Python identifier")
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", str(axis)):
+            raise StafpipeError(f"{key}: an axis name is an ASCII identifier")
         if isinstance(values, list) and values and all(isinstance(v, str | int | float) for v in values):
             axes[axis] = {str(v): [] for v in values}
         elif isinstance(values, dict) and values:
@@ -244,6 +244,7 @@ def plan_pipeline(
     """Every step composed (a bad config stops the pipeline before any work): the step, its overrides with earlier
     steps' directories filled in, its run directory, its config hash and its config."""
     dirs: dict[str, Path] = {}
+    stages: dict[str, str] = {}
     plan: list[tuple[PipelineStep, list[str], Path, str, DictConfig]] = []
     for i, step in enumerate(pipe.steps):
         if step.stage not in STAGE_FUNCTIONS:
@@ -253,10 +254,16 @@ def plan_pipeline(
             )
 
         def ref(match: re.Match[str], _step: PipelineStep = step) -> str:
-            found = [str(d) for n, d in dirs.items() if fnmatch.fnmatchcase(n, match.group(1))]
-            if not found:
+            names = [n for n in dirs if fnmatch.fnmatchcase(n, match.group(1))]
+            if not names:
                 raise StafpipeError(f"step '{_step.name}' refers to '{match.group(1)}', which is not an earlier step")
-            return ",".join(found)
+            kinds = {stages[n] for n in names}
+            if len(kinds) > 1 and match.group(1) != "*":  # a pattern meant for one kind of step that caught another
+                raise StafpipeError(
+                    f"step '{_step.name}': '{match.group(1)}' matches steps of stages {sorted(kinds)}; "
+                    "narrow the pattern so that it names steps of one stage"
+                )
+            return ",".join(str(dirs[n]) for n in names)
 
         overrides = [*extra, *(_STEP_REF.sub(ref, o) for o in step.overrides)]
         try:
@@ -273,5 +280,6 @@ def plan_pipeline(
         )
         run_dir = (out_root / "pipelines" / home / f"{number:02d}-{short}-{digest[:10]}").resolve()
         dirs[step.name] = run_dir
+        stages[step.name] = step.stage
         plan.append((step, overrides, run_dir, digest, cfg))
     return plan

@@ -209,7 +209,7 @@ class StafConfig:
     maps: MapsConfig = field(default_factory=MapsConfig)
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     method: Any = MISSING
-    """The method (group `method`); each option has its own dataclass (stafpipe.controllers.METHODS)."""
+    """The method (group `method`); each option has its own dataclass (stafpipe.registry.METHODS)."""
     world: WorldConfig = field(default_factory=WorldConfig)
     sensing: SensingConfig = field(default_factory=SensingConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)

@@ -18,9 +18,9 @@ from stafpipe.controllers.orca import avoid_movers
 from stafpipe.errors import StafpipeError
 from stafpipe.learning.checkpoint import ensemble_paths, load_members, load_policy
 from stafpipe.learning.config import RewardConfig
-from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import commands
 from stafpipe.learning.teachers import AVOID_DISTANCE, AVOID_GAIN, teacher_actions
+from stafpipe.registry import adapter_class
 from stafpipe.sensing import Observation
 
 if TYPE_CHECKING:
@@ -59,15 +59,20 @@ def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[An
     """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the method's plan
     settings (`method.<plan_key>.*` against `train_ppo.<plan_key>.*`, the adapter's `plan_key`: `plan` for
     staf_planned, `subteaming` for staf) and the sensing radius (against `sensing.radius`), as far as the checkpoint
-    recorded them. Key -> (this run's value, the training value)."""
+    recorded them; a plan setting it did not record differs where the adapter's `plan_recorded_in_full` says so. Key
+    -> (this run's value, the training value, or "not recorded")."""
     trained = made_by.get("train_ppo", {})
     differ: dict[str, tuple[Any, Any]] = {}
-    field = adapter_class(cfg.name).plan_key
+    kind = adapter_class(cfg.name)
+    field = kind.plan_key
     plan, recorded = getattr(cfg, field, None), trained.get(field)
     skip = PLAN_SAFEGUARDS if field == "plan" else ()
     if plan is not None and isinstance(recorded, dict):
         for key, value in dataclasses.asdict(plan).items():
-            if key in recorded and recorded[key] != value and key not in skip:
+            if key not in recorded:
+                if kind.plan_recorded_in_full:
+                    differ[f"method.{field}.{key}"] = (value, "not recorded")
+            elif recorded[key] != value and key not in skip:
                 differ[f"method.{field}.{key}"] = (value, recorded[key])
     radius = made_by.get("sensing", {}).get("radius")
     if radius is not None and float(radius) != float(cfg.sensing_radius):

@@ -24,7 +24,7 @@ from stafpipe.controllers.learned import LearnedController
 from stafpipe.errors import StafpipeError, require
 from stafpipe.learning.config import PolicyConfig, RewardConfig
 from stafpipe.learning.features import flat_rows
-from stafpipe.learning.registry import ADAPTERS, adapter_class
+from stafpipe.registry import adapter_class, learned_methods
 
 
 @dataclass
@@ -56,7 +56,8 @@ class OnnxConfig:
         if path.is_dir():
             raise StafpipeError(f"{key}.model: {path} is a directory, not an ONNX file")
         require(path.is_file(), f"{key}.model", "must name an existing file", self.model)
-        require(self.features in ADAPTERS, f"{key}.features", f"must be one of {sorted(ADAPTERS)}", self.features)
+        learned = learned_methods()
+        require(self.features in learned, f"{key}.features", f"must be one of {learned}", self.features)
         require(self.deterministic, f"{key}.deterministic", "must be true (the model gives the action itself)", False)
         require(self.approach_cap_gap >= 0, f"{key}.approach_cap_gap", "must be >= 0", self.approach_cap_gap)
 

@@ -5,7 +5,7 @@ measured to, and the goal slot its arrival is judged at), and the method's own r
 (`rollout.collect`) and the evaluation controller (`controllers/learned.py`) both drive a method only through its
 adapter, on batches of worlds (B, n, ...), so training and evaluation cannot drift apart and the trainer has no
 method-name branches: a new learned method is a network file, an adapter, a config and its entry in
-`learning/registry.py:ADAPTERS`.
+`stafpipe/registry.py:METHODS`.
 """
 
 from __future__ import annotations
@@ -44,6 +44,10 @@ class Adapter:
     network: ClassVar[type[PolicyNet]]
     plan_key: ClassVar[str] = "plan"
     """The field of the method's config (and of `train_ppo`) holding the settings passed as `plan`."""
+    plan_recorded_in_full: ClassVar[bool] = False
+    """True: a checkpoint whose `made_by` lacks one of the plan's settings was trained under other rules and is
+    refused like one with another value (controllers/learned.py:checkpoint_mismatch); false: a setting it lacks is
+    taken to be one added later whose default keeps the old behaviour."""
 
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: Any, sensing_radius: float):
         self.policy, self.reward_cfg, self.plan_cfg, self.sensing_radius = policy, reward, plan, sensing_radius

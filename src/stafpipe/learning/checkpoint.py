@@ -17,7 +17,7 @@ FORMAT = "stafpipe.policy/1"
 
 def build_policy(method: str, cfg: PolicyConfig) -> PolicyNet:
     """A fresh policy network of the learned method `method` (its adapter names the network)."""
-    from stafpipe.learning.registry import adapter_class
+    from stafpipe.registry import adapter_class
 
     return adapter_class(method).network(cfg)
 
@@ -30,19 +30,17 @@ SHIPPED = "shipped:"
 """`shipped:NAME` names the checkpoint NAME.pt shipped with the package (e.g. `shipped:staf_planned_seed1`)."""
 
 
-SHIPPED_PARTNERS: dict[str, tuple[str, ...]] = {"staf_planned": ("shipped:staf_planned_seed1",)}
-"""The shipped policy of a method acts with these other training runs of its network averaged in (`method.ensemble`
-left unset and `method.checkpoint` empty): STAF's two runs (how much better than one:
-the STAF-planned journal (docs/staf_planned.md), "The pair as
-the default")."""
-
-
 def ensemble_paths(checkpoint: str, ensemble: list[str] | None, method: str) -> list[str]:
     """The runs averaged with the checkpoint: `method.ensemble` as given; unset, the shipped partners when the
-    checkpoint is the shipped one (empty) and none with any other (a user's own checkpoint is never mixed with ours)."""
+    checkpoint is the shipped one (empty) and none with any other (a user's own checkpoint is never mixed with ours).
+    The shipped partners are the registry's (`Method.partners`; STAF-planned's two runs, how much better than one:
+    the STAF-planned journal (docs/staf_planned.md), "The pair as the default")."""
+    from stafpipe.registry import load_plugins
+
     if ensemble is not None:
         return list(ensemble)
-    return list(SHIPPED_PARTNERS.get(method, ())) if not checkpoint else []
+    methods = load_plugins()
+    return list(methods[method].partners) if not checkpoint and method in methods else []
 
 
 def shipped_policy(method: str) -> Path:

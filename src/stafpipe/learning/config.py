@@ -7,8 +7,8 @@ from dataclasses import dataclass, field
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.errors import require
 from stafpipe.formations import FORMATION_TYPES
-from stafpipe.learning.registry import ADAPTERS
 from stafpipe.methods.staf.subteaming import SubteamingConfig
+from stafpipe.registry import learned_methods
 
 
 @dataclass
@@ -196,7 +196,8 @@ class TrainPPOConfig:
     trained under; an eval of `method=staf` must use the same settings."""
 
     def check(self, key: str = "train_ppo") -> None:
-        require(self.method in ADAPTERS, f"{key}.method", f"must be one of {sorted(ADAPTERS)}", self.method)
+        learned = learned_methods()
+        require(self.method in learned, f"{key}.method", f"must be one of {learned}", self.method)
         im = self.imitation
         require(
             im.epochs >= 0 and im.rollouts >= 1 and im.batch >= 1 and im.dagger >= 0,
@@ -229,12 +230,16 @@ class TrainPPOConfig:
             self.worlds,
         )
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
-        require(
-            not self.policy.drive_input or self.method in ("staf", "staf_planned"),
-            f"{key}.policy.drive_input",
-            "is read by method=staf and method=staf_planned only",
-            self.method,
-        )
+        if self.policy.drive_input:
+            from stafpipe.learning.staf_net import StafPolicy
+            from stafpipe.registry import adapter_class
+
+            require(
+                issubclass(adapter_class(self.method).network, StafPolicy),
+                f"{key}.policy.drive_input",
+                "is read by the STAF network only (method=staf, method=staf_planned)",
+                self.method,
+            )
         from stafpipe.devices import check_device
 
         check_device(self.device, f"{key}.device")

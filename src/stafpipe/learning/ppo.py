@@ -28,10 +28,10 @@ from stafpipe.learning.config import TrainPPOConfig
 from stafpipe.learning.distributed import ALONE, Workers
 from stafpipe.learning.features import Features
 from stafpipe.learning.policy_net import PolicyNet
-from stafpipe.learning.registry import adapter_class
 from stafpipe.learning.rollout import Rollout, collect, commands, gae
 from stafpipe.learning.teachers import near_neighbour_copy, near_wall_copy, teacher_actions
 from stafpipe.progress import progress
+from stafpipe.registry import adapter_class
 from stafpipe.scenario import Scenario
 from stafpipe.sensing import Observation, SensingConfig
 from stafpipe.torch_io import save_payload, training_device

@@ -26,6 +26,7 @@ class StafAdapter(SubteamAdapter):
     name = "staf"
     network = StafPolicy
     plan_key: ClassVar[str] = "subteaming"
+    plan_recorded_in_full: ClassVar[bool] = False
     plan_cfg: SubteamingConfig
 
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: object, sensing_radius: float):

@@ -61,4 +61,4 @@ class StafController(LearnedController):
 
     def __init__(self, cfg: StafConfig) -> None:
         super().__init__(cfg)
-        self.adapter.messages = cfg.messages  # type: ignore[attr-defined]  # a StafAdapter (ADAPTERS["staf"])
+        self.adapter.messages = cfg.messages  # type: ignore[attr-defined]  # a StafAdapter (the registry's "staf")
