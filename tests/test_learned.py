@@ -344,23 +344,6 @@ def test_a_checkpoint_trained_with_other_settings_is_refused_unless_allowed(work
     assert checkpoint_mismatch(run, {}) == {}  # an old checkpoint that recorded nothing is not refused
 
 
-def test_a_staf_checkpoint_that_lacks_a_subteaming_setting_is_refused() -> None:
-    """STAF's adapter records its subteaming rules in full: a policy trained before `lead` existed saw goals carried
-    otherwise, so a missing setting differs; STAF-planned's later plan settings keep the old behaviour by default."""
-    import dataclasses
-
-    from stafpipe.controllers.learned import checkpoint_mismatch
-    from stafpipe.methods.staf.method import StafConfig
-
-    full = dataclasses.asdict(StafConfig().subteaming)
-    assert checkpoint_mismatch(StafConfig(), {"train_ppo": {"subteaming": full}}) == {}
-    older = {k: v for k, v in full.items() if k != "lead"}
-    assert checkpoint_mismatch(StafConfig(), {"train_ppo": {"subteaming": older}}) == {
-        "method.subteaming.lead": (0.4, "not recorded")
-    }
-    assert checkpoint_mismatch(StafMethodConfig(), {"train_ppo": {"plan": {"m": "2"}}}) == {}
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("top_speed", "recorded", "driven"), [(2.0, 1.0, 1.0), (0.5, 1.0, 0.5), (2.0, None, 2.0)])
 def test_robots_faster_than_the_training_robots_are_driven_no_faster(tmp_path, top_speed, recorded, driven) -> None:

@@ -58,24 +58,26 @@ def test_balanced_labels_take_the_most_probable_balanced_division():
 def test_a_carried_goal_keeps_the_goal_formation_and_turns_with_the_route():
     goal = place(formation_slots("wedge", 5, 1.0), (20.0, 0.0), 0.0)
     frame = PathFrame(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [20.0, 10.0]]))
-    cfg = SubteamingConfig(lookahead=2.0, lead=0.4)
     along = goal[:, 0] - goal[:, 0].mean()  # each slot's place along the team's heading (x)
     level = 13.0 + along  # in formation, centred three metres up the second leg
-    target, centre = carried_goal(level, 13.0, frame, goal, cfg, 0.0)
-    assert np.allclose(centre, [10.0, 3.4])  # `lead` ahead of the formation's centre
-    turned = (goal - goal.mean(axis=0)) @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # the formation turned by 90 degrees
-    assert np.allclose(target - centre, turned)
+    for cfg, ahead in ((SubteamingConfig(), 2.0), (SubteamingConfig(lead=0.4), 0.4)):
+        target, centre = carried_goal(level, 13.0, frame, goal, cfg, 0.0)
+        assert np.allclose(centre, [10.0, 3.0 + ahead])  # `lookahead` (or `lead`) ahead of the formation's centre
+        turned = (goal - goal.mean(axis=0)) @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # the formation turned by 90 deg
+        assert np.allclose(target - centre, turned)
+        assert np.array_equal(carried_goal(np.full(5, 29.0), 29.0, frame, goal, cfg, 0.0)[0], goal)  # near the end
     # a robot far behind its place sets its target round the route point `lookahead` ahead of that place
     behind = level.copy()
     behind[4] -= 5.0
-    target, centre = carried_goal(behind, 12.0, frame, goal, cfg, 0.0)
     own = 13.0 - 5.0 + 2.0  # its progress less its slot's offset, two metres on: 10 m, the corner
+    target, centre = carried_goal(behind, 12.0, frame, goal, SubteamingConfig(), 0.0)
+    assert np.allclose(centre[4], [10.0, own - 10.0]) and np.allclose(centre[:4], [10.0, 4.0])
+    target, centre = carried_goal(behind, 12.0, frame, goal, SubteamingConfig(lead=0.4), 0.0)
     assert np.allclose(centre[4], [10.0, own - 10.0]) and np.allclose(centre[:4], [10.0, 2.4])
-    assert np.array_equal(carried_goal(np.full(5, 29.0), 29.0, frame, goal, cfg, 0.0)[0], goal)  # near the end
 
 
-def test_a_robot_ahead_of_its_place_sees_its_goal_closer_and_one_behind_further():
-    """The moving formation closes its errors: every target is `lead` ahead of its slot round the formation's centre,
+def test_with_a_lead_a_robot_ahead_of_its_place_sees_its_goal_closer_and_one_behind_further():
+    """With `lead`, the moving formation closes its errors: every target is `lead` ahead of its slot round its centre,
     so the distance to it is `lead` less the robot's error along the way (a step towards it slows or hurries)."""
     goal = place(formation_slots("wedge", 5, 0.6), (30.0, 0.0), 0.0)
     frame = PathFrame(np.array([[0.0, 0.0], [40.0, 0.0]]))
@@ -150,10 +152,10 @@ def test_subteams_enter_in_turn_and_regroup_once_all_are_through():
     waiting = plan.labels == plan.order[1]
     target = plan.step(start)
     assert np.array_equal(target[waiting], start[waiting])  # the second subteam stands where it is
-    assert (target[~waiting, 0] > 0.3).all()  # the first goes: `lead` ahead of its place
+    assert (target[~waiting, 0] > 1.0).all()  # the first goes
     first_in = start.copy()
     first_in[~waiting, 0] = 8.5  # the first subteam has entered the passage: the second goes
-    assert (plan.step(first_in)[waiting, 0] > 0.3).all()
+    assert (plan.step(first_in)[waiting, 0] > 1.0).all()
     assert not plan.regrouped
     through = start.copy()
     through[:, 0] = 12.5
@@ -166,5 +168,5 @@ def test_subteams_enter_in_turn_and_regroup_once_all_are_through():
 def test_without_turns_every_subteam_goes_at_once():
     plan = _corridor_plan(take_turns=False)
     target = plan.step(plan.hold.copy())
-    assert (target[:, 0] > 0.3).all()
+    assert (target[:, 0] > 1.0).all()
     assert math.isclose(float(plan.expected[0, 1]), 1.0)

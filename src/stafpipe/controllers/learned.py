@@ -59,8 +59,8 @@ def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[An
     """Settings of this run that differ from those the checkpoint recorded at training (`made_by`): the method's plan
     settings (`method.<plan_key>.*` against `train_ppo.<plan_key>.*`, the adapter's `plan_key`: `plan` for
     staf_planned, `subteaming` for staf) and the sensing radius (against `sensing.radius`), as far as the checkpoint
-    recorded them; a plan setting it did not record differs where the adapter's `plan_recorded_in_full` says so. Key
-    -> (this run's value, the training value, or "not recorded")."""
+    recorded them (a setting it did not record was added later, with a default that keeps the old behaviour). Key ->
+    (this run's value, the training value)."""
     trained = made_by.get("train_ppo", {})
     differ: dict[str, tuple[Any, Any]] = {}
     kind = adapter_class(cfg.name)
@@ -69,10 +69,7 @@ def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[An
     skip = PLAN_SAFEGUARDS if field == "plan" else ()
     if plan is not None and isinstance(recorded, dict):
         for key, value in dataclasses.asdict(plan).items():
-            if key not in recorded:
-                if kind.plan_recorded_in_full:
-                    differ[f"method.{field}.{key}"] = (value, "not recorded")
-            elif recorded[key] != value and key not in skip:
+            if key in recorded and recorded[key] != value and key not in skip:
                 differ[f"method.{field}.{key}"] = (value, recorded[key])
     radius = made_by.get("sensing", {}).get("radius")
     if radius is not None and float(radius) != float(cfg.sensing_radius):

@@ -44,10 +44,6 @@ class Adapter:
     network: ClassVar[type[PolicyNet]]
     plan_key: ClassVar[str] = "plan"
     """The field of the method's config (and of `train_ppo`) holding the settings passed as `plan`."""
-    plan_recorded_in_full: ClassVar[bool] = False
-    """True: a checkpoint whose `made_by` lacks one of the plan's settings was trained under other rules and is
-    refused like one with another value (controllers/learned.py:checkpoint_mismatch); false: a setting it lacks is
-    taken to be one added later whose default keeps the old behaviour."""
 
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: Any, sensing_radius: float):
         self.policy, self.reward_cfg, self.plan_cfg, self.sensing_radius = policy, reward, plan, sensing_radius

@@ -26,7 +26,6 @@ class StafAdapter(SubteamAdapter):
     name = "staf"
     network = StafPolicy
     plan_key: ClassVar[str] = "subteaming"
-    plan_recorded_in_full: ClassVar[bool] = True  # a policy trained before `subteaming.lead` saw other goals
     plan_cfg: SubteamingConfig
 
     def __init__(self, policy: PolicyConfig, reward: RewardConfig, plan: object, sensing_radius: float):

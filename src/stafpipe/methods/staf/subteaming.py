@@ -48,10 +48,12 @@ class SubteamingConfig:
     """m kept free to each side wall for a formation to count as fitting a passage."""
     lookahead: float = 2.0
     """m: how far ahead of a robot's own place on the route its goal is carried at most (`carried_goal`)."""
-    lead: float = 0.4
-    """m: how far ahead of its place in the moving formation a robot's carried goal lies (`carried_goal`). Below the
-    distance at which a step towards the goal reaches top speed, so that a robot ahead of its place slows and one
-    behind hurries: the formation closes its errors while it moves."""
+    lead: float | None = None
+    """m: how far ahead of its place in the moving formation a robot's carried goal lies (`carried_goal`); below the
+    distance at which a step towards the goal reaches top speed (0.4 with the teacher's gain of 2), a robot ahead of
+    its place slows and one behind hurries, so the formation closes its errors while it moves. None (the shipped
+    policy's training): `lookahead` ahead of the (sub)team's mean progress. docs/staf_paper.md, "The goal a robot
+    sees", says what each measured."""
     take_turns: bool = True
     """Subteams enter the first passage one after another (rule 5); false: all at once."""
 
@@ -60,7 +62,8 @@ class SubteamingConfig:
         require(self.min_spacing > 0, f"{key}.min_spacing", "must be > 0", self.min_spacing)
         require(self.wall_margin >= 0, f"{key}.wall_margin", "must be >= 0", self.wall_margin)
         require(self.lookahead > 0, f"{key}.lookahead", "must be > 0", self.lookahead)
-        require(0 < self.lead <= self.lookahead, f"{key}.lead", "must be > 0 and <= lookahead", self.lead)
+        if self.lead is not None:
+            require(0 < self.lead <= self.lookahead, f"{key}.lead", "must be > 0 and <= lookahead", self.lead)
 
 
 def subteam_count(cfg: SubteamingConfig, kind: str, n: int, eta: float, radius: float, angle_deg: float) -> int:
@@ -193,7 +196,9 @@ class SubteamPlan:
         self.centre = self.hold.copy()  # each robot's (sub)team's carried centre, for the teacher (`free_aim`)
         for members, goal, centre, offset, along in self._moving:
             mine = self.progress[members]
-            middle = float(self.frame.progress(pos[members].mean(axis=0)[None], near=mine.mean()[None])[0])
+            middle = float(mine.mean())
+            if self.cfg.lead is not None:  # the centroid's progress (`carried_goal`)
+                middle = float(self.frame.progress(pos[members].mean(axis=0)[None], near=mine.mean()[None])[0])
             target[members], self.centre[members] = carry(
                 mine, middle, self.frame, goal, centre, offset, along, self.cfg, self.heading
             )
@@ -207,21 +212,24 @@ class SubteamPlan:
 def carried_goal(
     progress: np.ndarray, middle: float, frame: PathFrame, goal: np.ndarray, cfg: SubteamingConfig, heading: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(k, 2) targets of one (sub)team whose robots are `progress` (k,) along the route `frame` and whose centroid
-    is `middle` along it, with goal slots `goal` (k, 2) of a formation facing `heading` (rad), and (k, 2) the route
-    point each target is set round: the slots themselves once `middle` is within `cfg.lookahead` of the route's end;
-    before that, each robot's slot offset in the formation, turned to the route's direction, round the route point
-    `cfg.lead` ahead of `middle`, but never more than `cfg.lookahead` ahead of the robot's own place (its progress
-    less its slot's offset along the route).
+    """(k, 2) targets of one (sub)team whose robots are `progress` (k,) along the route `frame`, `middle` along it
+    as a whole, with goal slots `goal` (k, 2) of a formation facing `heading` (rad), and (k, 2) the route point each
+    target is set round: the slots themselves once `middle` is within `cfg.lookahead` of the route's end; before that,
+    each robot's slot offset in the formation, turned to the route's direction, round a route point ahead:
 
-    Why: the differences between teammates' targets are those of their goal slots (STAF's s_j - s_i compares goals);
-    a robot ahead of its place sees its target close (or behind it) and slows, one behind sees it further and
-    hurries, so the moving formation corrects its shape (a goal carried far ahead of every robot puts every robot at
-    top speed and freezes whatever shape the team had); a robot left behind a wall aims along the route from where it
-    is, not at a point beyond the wall; and no goal lies round a corner the network cannot see round. The centroid's
-    progress, not the mean of the robots' own: where the route bends, the robots of a wide formation across it project
-    onto it unevenly, and a formation standing still across the route can have a mean progress `cfg.lead` behind
-    where it stands (a line of nine stood short of its goal)."""
+    - `cfg.lead` None (the shipped policy's training): `middle` is the robots' mean progress, and the point is
+      `cfg.lookahead` ahead of it, or of the robot's own place (its progress less its slot's offset along the
+      route) where that lags behind it. Every robot aims about 2 m ahead and runs at top speed.
+    - `cfg.lead` set: `middle` is the centroid's progress, and the point is `cfg.lead` ahead of it, but never more
+      than `cfg.lookahead` ahead of the robot's own place. A robot ahead of its place sees its target close (or
+      behind it) and slows, one behind sees it further and hurries, so the moving formation corrects its shape. The
+      centroid's progress, not the mean of the robots' own: where the route bends, the robots of a wide formation
+      across it project onto it unevenly, and a formation standing still across the route can have a mean progress
+      `cfg.lead` behind where it stands (a line of nine stood short of its goal).
+
+    Either way the differences between teammates' targets are those of their goal slots (STAF's s_j - s_i compares
+    goals); a robot left behind a wall aims along the route from where it is, not at a point beyond the wall; and no
+    goal lies round a corner the network cannot see round."""
     return carry(progress, middle, frame, goal, *slot_offsets(goal, heading), cfg, heading)
 
 
@@ -247,7 +255,11 @@ def carry(
     """`carried_goal` with the slots' `slot_offsets` computed beforehand."""
     if frame.length - middle <= cfg.lookahead:
         return goal, np.broadcast_to(goal_centre, goal.shape)
-    point, direction = frame.at(np.minimum(progress - along + cfg.lookahead, middle + cfg.lead))
+    if cfg.lead is None:
+        ahead = np.minimum(progress - along, middle) + cfg.lookahead
+    else:
+        ahead = np.minimum(progress - along + cfg.lookahead, middle + cfg.lead)
+    point, direction = frame.at(ahead)
     turn = direction - heading
     c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
     turned = np.concatenate([c * offset[:, :1] - s * offset[:, 1:], s * offset[:, :1] + c * offset[:, 1:]], axis=1)
