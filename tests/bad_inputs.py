@@ -153,6 +153,7 @@ def markdown() -> str:
             out = out.replace(str(Path(d).resolve()) + "/", "").replace(d + "/", "").replace(d, ".")
         message = " ".join(line for line in out.splitlines() if line.startswith("error:"))
         message = (message or out.strip().splitlines()[-1]).replace("|", "\\|")
+        message = message.replace("] [", "] \\[")  # not a Markdown reference link `[a] [b]`
         words = " ".join(case.words).replace("{tmp}/", "").replace("{tmp}", ".").replace("{checkpoints}/", "")
         test = case.tested_in.replace("tests/", "")
         lines.append(f"| {k} | {case.group} | {case.kind} | `{words}` | {code} | {message} | {test} |")

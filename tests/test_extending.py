@@ -84,10 +84,10 @@ def toy(tmp_path, monkeypatch):
     (tmp_path / "conf" / "method").mkdir(parents=True)
     (tmp_path / "conf" / "method" / "toy.yaml").write_text(TOY_YAML)
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setitem(METHODS, "toy", METHODS["dgnn"])  # restored by monkeypatch; the import replaces it
     __import__("toyplug")
     yield search_path_override([tmp_path / "conf"])
     sys.modules.pop("toyplug", None)
+    METHODS.pop("toy", None)
 
 
 @pytest.mark.slow  # about 15 s on 2 cores: one training iteration, one episode, one export

@@ -231,11 +231,10 @@ class TrainPPOConfig:
         )
         require(self.eval_every >= 0, f"{key}.eval_every", "must be >= 0", self.eval_every)
         if self.policy.drive_input:
-            from stafpipe.learning.staf_net import StafPolicy
             from stafpipe.registry import adapter_class
 
             require(
-                issubclass(adapter_class(self.method).network, StafPolicy),
+                adapter_class(self.method).network.reads_drive_flag,
                 f"{key}.policy.drive_input",
                 "is read by the STAF network only (method=staf, method=staf_planned)",
                 self.method,

@@ -4,6 +4,7 @@ trainer has no method-name branches): a Gaussian policy over velocity commands w
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import ClassVar
 
 import torch
 from torch import nn
@@ -18,6 +19,8 @@ class PolicyNet(nn.Module):
 
     cfg: PolicyConfig
     log_std: nn.Parameter
+    reads_drive_flag: ClassVar[bool] = False
+    """Whether the network takes `policy.drive_input`'s differential-drive flag in its own state."""
 
     def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError

@@ -34,6 +34,8 @@ def proportional_step(own: torch.Tensor, gain: float) -> torch.Tensor:
 class StafPolicy(PolicyNet):
     """phi (W^z, W^f) + psi, and a critic head (own embedding and the team's mean: a centralized critic)."""
 
+    reads_drive_flag = True
+
     def __init__(self, cfg: PolicyConfig):
         super().__init__()
         h = cfg.hidden
