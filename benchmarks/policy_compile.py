@@ -18,10 +18,10 @@ from collections.abc import Callable
 import torch
 
 from stafpipe.learning.config import PolicyConfig
-from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
 from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.learning.staf_net import StafPolicy
+from stafpipe.methods.dgnn.network import DGNNPolicy
 
 ROBOTS = 10
 

@@ -35,10 +35,10 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 from stafpipe.learning.config import PolicyConfig, TrainPPOConfig
-from stafpipe.learning.dgnn import DGNNPolicy
 from stafpipe.learning.distributed import joined, launch, leave
 from stafpipe.learning.ppo import teams_of, update
 from stafpipe.learning.rollout import collect, gae
+from stafpipe.methods.dgnn.network import DGNNPolicy
 from stafpipe.registry import adapter_class
 from stafpipe.scenario_pool import load_named_scenario, path_and_width
 from stafpipe.sensing import SensingConfig

@@ -25,7 +25,7 @@ import numpy as np
 from stafpipe.config.checks import LearnedMethodChecks
 from stafpipe.controllers.learned import LearnedController
 from stafpipe.learning.adapters import Adapter, Step
-from stafpipe.learning.dgnn import DGNNPolicy
+from stafpipe.methods.dgnn.network import DGNNPolicy
 from stafpipe.learning.features import features
 from stafpipe.registry import Method, register
 

@@ -79,7 +79,7 @@ def test_controller_acts_as_the_rollout_adapter_does(method) -> None:
     controller's command equals the policy mean on the adapter's batched features, step after step."""
     sc = load_named_scenario("corridor")
     cfg = {
-        "dgnn": lambda: __import__("stafpipe.controllers.dgnn", fromlist=["x"]).DGNNConfig(),
+        "dgnn": lambda: __import__("stafpipe.methods.dgnn.method", fromlist=["x"]).DGNNConfig(),
         "staf_planned": lambda: StafMethodConfig(
             ensemble=[]
         ),  # the checkpoint alone (the default adds its partner run)
@@ -350,8 +350,8 @@ def test_robots_faster_than_the_training_robots_are_driven_no_faster(tmp_path, t
     """The network's action is a fraction of the top speed of the robots it was trained with (`made_by.max_speed`):
     robots of twice that speed get the trained robots' commands, slower robots their own fraction of it, and a
     record without the speed (written before it was kept) the robot's own top speed, as before."""
-    from stafpipe.controllers.dgnn import DGNNConfig
     from stafpipe.learning.checkpoint import save_policy
+    from stafpipe.methods.dgnn.method import DGNNConfig
 
     base = load_named_scenario("corridor")
     sc = build_scenario(dataclasses.replace(base.spec, robot=dataclasses.replace(base.spec.robot, max_speed=top_speed)))

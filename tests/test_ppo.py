@@ -359,8 +359,8 @@ def test_drive_input_and_direction_weight_are_checked() -> None:
 def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error() -> None:
     """The update reads its losses once, after its minibatches (not at each, which waits for a GPU); a NaN there
     stops training rather than saving NaN weights."""
-    from stafpipe.learning.dgnn import DGNNPolicy
     from stafpipe.learning.rollout import collect
+    from stafpipe.methods.dgnn.network import DGNNPolicy
     from stafpipe.registry import adapter_class
     from stafpipe.world import Worlds
 
@@ -386,8 +386,8 @@ def test_an_update_whose_losses_are_not_finite_stops_training_with_a_clear_error
 def test_dgnn_messages_over_the_neighbour_list_are_the_dense_masked_ones(message_layers) -> None:
     """The CPU's edge-list trunk (the training and eval path) against the dense masked form (ONNX, GPU): the same
     outputs and gradients, with robots that have no neighbour and a world-step with none at all."""
-    from stafpipe.learning.dgnn import DGNNPolicy
     from stafpipe.learning.features import EDGE, OWN
+    from stafpipe.methods.dgnn.network import DGNNPolicy
 
     torch.manual_seed(3)
     policy = DGNNPolicy(PolicyConfig(hidden=16, message_layers=message_layers))

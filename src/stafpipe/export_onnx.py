@@ -5,7 +5,7 @@ Four networks, one team (one world) per call, any number of robots (the `robots`
   STAF-planned (ours): own (n, 6), edge (n, n, 9), mask (n, n) -> action (n, 2), the mean action a_i = psi(f_i)
   (learning/staf_net.py); the same network, trained under other rules.
 - `dgnn`: the DGNN baseline's policy (Blumenkamp et al., ICRA 2022): own (n, 7), edge (n, n, 5), mask (n, n) ->
-  action (n, 2) (learning/dgnn.py).
+  action (n, 2) (methods/dgnn/network.py).
 - `high`: STAF's deep graph cut (Sec. 3): x (n, F), adjacency (n, n), m () -> assignment (n, m_max), the soft
   subteam assignment Y whose row argmax is each robot's subteam (highlevel/model.py), in the dense form.
 Only the deterministic parts are exported: no critic, no sampling. The file's metadata carries the checkpoint's
@@ -104,15 +104,11 @@ def example_inputs(network: str, module: Any, n: int = 5) -> dict[str, torch.Ten
             "adjacency": adjacency,
             "m": torch.tensor(min(2, cfg.m_max), dtype=torch.int64),
         }
-    from stafpipe.learning.dgnn import DGNNPolicy
-    from stafpipe.learning.features import EDGE, OWN, STAF_EDGE, STAF_OWN
-    from stafpipe.learning.staf_net import StafPolicy
-
     net = adapter_class(network).network
-    if not issubclass(net, StafPolicy | DGNNPolicy):
-        raise StafpipeError(f"export: {network}'s network {net.__name__} has no example inputs (STAF's or DGNN's only)")
-    staf = issubclass(net, StafPolicy)
-    own, edge = (STAF_OWN + int(module.policy.cfg.drive_input), STAF_EDGE) if staf else (OWN, EDGE)
+    if net.own_features is None or net.edge_features is None:
+        raise StafpipeError(f"export: {network}'s network {net.__name__} does not declare its input widths")
+    own = net.own_features + int(module.policy.cfg.drive_input and net.reads_drive_flag)
+    edge = net.edge_features
     mask = (torch.rand(n, n, generator=gen) < 0.6) & ~torch.eye(n, dtype=torch.bool)
     return {
         "own": torch.randn(n, own, generator=gen),

@@ -47,9 +47,9 @@ METHODS: dict[str, Method] = {
     ),
     "zhu": Method("stafpipe.controllers.zhu_config:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": Method(
-        "stafpipe.controllers.dgnn:DGNNConfig",
-        "stafpipe.controllers.dgnn:DGNNController",
-        adapter="stafpipe.learning.adapters:DGNNAdapter",
+        "stafpipe.methods.dgnn.method:DGNNConfig",
+        "stafpipe.methods.dgnn.method:DGNNController",
+        adapter="stafpipe.methods.dgnn.adapter:DGNNAdapter",
     ),
     "staf_planned": Method(
         "stafpipe.controllers.staf:StafMethodConfig",

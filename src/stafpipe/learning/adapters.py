@@ -18,10 +18,8 @@ import numpy as np
 from stafpipe.controllers.base import TeamInfo
 from stafpipe.controllers.plan_config import PlanConfig
 from stafpipe.controllers.staf_plan import StafPlan
-from stafpipe.geometry import path_length
 from stafpipe.learning.config import PolicyConfig, RewardConfig
-from stafpipe.learning.dgnn import DGNNPolicy
-from stafpipe.learning.features import Features, features, guide_targets, staf_features
+from stafpipe.learning.features import Features, staf_features
 from stafpipe.learning.policy_net import PolicyNet
 from stafpipe.learning.staf_net import StafPolicy
 from stafpipe.sensing import Observation
@@ -94,45 +92,6 @@ class Adapter:
     def drain_events(self, w: int) -> list[tuple[str, list[int], str]]:
         """Events (kind, robots, detail) of world w since the last call."""
         return []
-
-
-class DGNNAdapter(Adapter):
-    """DGNN (Blumenkamp et al., ICRA 2022): each robot drives to its own goal slot, guided along the path through the
-    middle of the passages (`policy.guide=path`; the path STAF's plan centres its subteams on); navigation and contact
-    rewards only."""
-
-    name = "dgnn"
-    network = DGNNPolicy
-
-    def begin(self, teams: list[TeamInfo], privileged: bool = False) -> None:
-        super().begin(teams)
-        # the centred path, not TeamInfo.path (the shortest, one radius from the walls): guided along a shortest path
-        # that hugs a wall, robots slid on it (docs/learning.md, "The guide path")
-        self.paths = [self.centred(t) for t in teams] if self.policy.guide == "path" else []
-        self.arcs = np.zeros((len(teams), len(teams[0].start)))  # each robot's arc length along its path, from 0
-        self.lengths = [path_length(p) for p in self.paths]
-
-    def step(self, obs: Observation, dt: float) -> Step:
-        pc = self.policy
-        goal = obs.goal
-        if pc.guide == "path":  # worlds that share a path are guided in one call (each robot independently)
-            target = np.empty_like(goal)
-            groups: dict[int, list[int]] = {}
-            for w, path in enumerate(self.paths):
-                groups.setdefault(id(path), []).append(w)
-            for ws in groups.values():
-                pos, own_goal = obs.position[ws].reshape(-1, 2), goal[ws].reshape(-1, 2)
-                path, near = self.paths[ws[0]], self.arcs[ws].reshape(-1)
-                guided, left = guide_targets(pos, own_goal, path, pc.lookahead, pc.release, near)
-                target[ws] = guided.reshape(len(ws), -1, 2)
-                self.arcs[ws] = (self.lengths[ws[0]] - left).reshape(len(ws), -1)
-        else:
-            target = goal
-        self._aim = self._target = target  # a teacher steers where the network is guided
-        return Step(features(obs, pc.goal_clip, self.sensing_radius, target), goal, target)
-
-    def features(self, obs: Observation) -> Features:
-        return features(obs, self.policy.goal_clip, self.sensing_radius, self._target)
 
 
 class SubteamAdapter(Adapter):

@@ -21,6 +21,10 @@ class PolicyNet(nn.Module):
     log_std: nn.Parameter
     reads_drive_flag: ClassVar[bool] = False
     """Whether the network takes `policy.drive_input`'s differential-drive flag in its own state."""
+    own_features: ClassVar[int | None] = None
+    edge_features: ClassVar[int | None] = None
+    """Widths of a robot's own state (without the drive flag) and of a pair's edge features (`learning/features.py`):
+    what `stafpipe export` builds example inputs from; a network that leaves them None is not exported."""
 
     def act(self, own: torch.Tensor, edge: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError

@@ -35,6 +35,7 @@ class StafPolicy(PolicyNet):
     """phi (W^z, W^f) + psi, and a critic head (own embedding and the team's mean: a centralized critic)."""
 
     reads_drive_flag = True
+    own_features, edge_features = STAF_OWN, STAF_EDGE
 
     def __init__(self, cfg: PolicyConfig):
         super().__init__()

@@ -1,6 +1,6 @@
 """`method=dgnn`: the DGNN baseline (Blumenkamp et al., ICRA 2022) as STAF compares with it: a decentralized GNN policy
 trained by `stafpipe train-ppo` with navigation and collision rewards only, no formation term. Each robot drives to its
-own goal slot; no subteams. Driven through `learning/adapters.py:DGNNAdapter`, as in training."""
+own goal slot; no subteams. Driven through `methods/dgnn/adapter.py:DGNNAdapter`, as in training."""
 
 from __future__ import annotations
 

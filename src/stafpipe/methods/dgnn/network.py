@@ -28,6 +28,8 @@ class DGNNPolicy(PolicyNet):
     """Gaussian policy over planar velocity commands (in the robot's frame, scaled by max speed) and a value per
     robot."""
 
+    own_features, edge_features = OWN, EDGE
+
     def __init__(self, cfg: PolicyConfig):
         super().__init__()
         h = cfg.hidden
