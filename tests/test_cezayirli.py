@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from stafpipe.controllers.base import TeamInfo
-from stafpipe.controllers.cezayirli import CezayirliConfig, CezayirliController, Switch, cost_gradient
 from stafpipe.errors import ConfigError
+from stafpipe.methods.cezayirli.method import CezayirliConfig, CezayirliController, Switch, cost_gradient
 from stafpipe.scenario import ScenarioConfig, TeamSpec, WorldBounds, build_scenario
 from stafpipe.sensing import SensingConfig
 from stafpipe.world import Worlds

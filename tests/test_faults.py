@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from stafpipe.controllers import make_controller
-from stafpipe.controllers.straight import StraightConfig
 from stafpipe.episode import run_episode
 from stafpipe.episode_log import read_episode
 from stafpipe.faults import Fault, drop_probability, transitions
 from stafpipe.geometry import Geometry
+from stafpipe.methods.straight.method import StraightConfig
 from stafpipe.paths import conf_dir
 from stafpipe.scenario import build_scenario, load_scenario_file
 from stafpipe.sensing import SensingConfig

@@ -39,11 +39,11 @@ class Method:
 
 METHODS: dict[str, Method] = {
     "straight": Method(
-        "stafpipe.controllers.straight:StraightConfig", "stafpipe.controllers.straight:StraightController"
+        "stafpipe.methods.straight.method:StraightConfig", "stafpipe.methods.straight.method:StraightController"
     ),
     "lf": Method("stafpipe.controllers.lf:LFConfig", "stafpipe.controllers.lf:LFController"),
     "cezayirli": Method(
-        "stafpipe.controllers.cezayirli:CezayirliConfig", "stafpipe.controllers.cezayirli:CezayirliController"
+        "stafpipe.methods.cezayirli.method:CezayirliConfig", "stafpipe.methods.cezayirli.method:CezayirliController"
     ),
     "zhu": Method("stafpipe.controllers.zhu_config:ZhuConfig", "stafpipe.controllers.zhu:ZhuController"),
     "dgnn": Method(
