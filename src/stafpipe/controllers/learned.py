@@ -63,8 +63,7 @@ def checkpoint_mismatch(cfg: Any, made_by: dict[str, Any]) -> dict[str, tuple[An
     (this run's value, the training value)."""
     trained = made_by.get("train_ppo", {})
     differ: dict[str, tuple[Any, Any]] = {}
-    kind = adapter_class(cfg.name)
-    field = kind.plan_key
+    field = adapter_class(cfg.name).plan_key
     plan, recorded = getattr(cfg, field, None), trained.get(field)
     skip = PLAN_SAFEGUARDS if field == "plan" else ()
     if plan is not None and isinstance(recorded, dict):
